@@ -1,0 +1,51 @@
+"""What a skill executor may ask for: typed intents, applied only to the UAV's own body.
+
+Executors never touch a vehicle. They return an ``Intent`` that the daemon passes through
+the safety gate and then to its own Vehicle port.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from aeroweaver_edge.wire import Vec3
+
+
+@dataclass(frozen=True)
+class Hold:
+    """Zero velocity; clears any motion target."""
+
+
+@dataclass(frozen=True)
+class MoveTo:
+    """Fly toward a point (NED metres) at up to ``speed`` m/s (None: the envelope's cap)."""
+
+    target: Vec3
+    speed: float | None = None
+
+
+@dataclass(frozen=True)
+class SetVelocity:
+    vel: Vec3
+
+
+Motion = Hold | MoveTo | SetVelocity
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    """A directed message to a named peer (or ``"*"`` for every reachable peer)."""
+
+    to: str
+    kind: str
+    body: dict[str, str | int | float | bool] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Intent:
+    motion: Motion
+    messages: tuple[Outgoing, ...] = ()
+    memo: dict[str, str] = field(default_factory=dict)  # facts the skill wants kept (e.g. a guess)
+
+
+HOLD = Intent(Hold())

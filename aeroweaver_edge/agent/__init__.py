@@ -1,0 +1,1 @@
+"""The decision side of a daemon: candidates, selector arithmetic, prompt, memory."""

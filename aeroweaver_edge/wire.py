@@ -1,0 +1,338 @@
+"""Every Zenoh payload and key expression, in one place.
+
+Payloads are ``msgspec.Struct``s encoded as MessagePack. Each carries a header (schema
+version, sender, boot epoch, sequence number, sender wall-clock stamp, TTL) so receivers
+can drop replays, stale or foreign data without trusting the clock of another UAV.
+Decoding never raises into the caller: bad bytes are counted, logged at a limited rate,
+and return ``None``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from typing import Any, Final, Literal, TypeVar
+
+import msgspec
+
+SCHEMA_VERSION: Final = 1
+MAX_PAYLOAD_BYTES: Final = 64 * 1024
+MAX_TEXT: Final = 4096
+
+log = logging.getLogger(__name__)
+
+Vec3 = tuple[float, float, float]
+"""North, east, down in metres (or metres per second), local NED frame."""
+
+
+class Header(msgspec.Struct, frozen=True, kw_only=True):
+    v: int = SCHEMA_VERSION
+    sender: str
+    epoch: int  # boot epoch: lets receivers tell a restart from a replay
+    seq: int
+    stamp: float  # sender wall clock, informative only: never compared for safety
+    ttl_s: float = 10.0
+
+
+class StateBeacon(msgspec.Struct, frozen=True, kw_only=True, tag="state"):
+    """Latest-wins pose and status of one UAV."""
+
+    h: Header
+    uav: str
+    round: int
+    pos: Vec3
+    vel: Vec3
+    role: str = ""
+    status: str = "nominal"
+
+
+class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
+    """A directed peer message; enters the recipient's next round as data, never as a command."""
+
+    h: Header
+    to: str
+    round: int
+    kind: str  # status / observation / intent / request / target / goal / ciphertext
+    body: dict[str, str | int | float | bool] = {}
+    sender_pos: Vec3 | None = None
+    ttl_rounds: int = 8
+
+
+class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
+    h: Header
+    uav: str
+    mission_id: str
+    episode: int
+    round: int
+    role: str
+    skill: str
+    invocation: str
+    label: str | None
+    held: bool
+    hold_reason: str | None = None
+    reward: float | None = None
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    latency_s: float = 0.0
+    messages_sent: int = 0
+    messages_dropped: int = 0
+
+
+class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):
+    """What the Commander tells every UAV about the mission. Data, never flight commands."""
+
+    h: Header
+    mission_id: str
+    task: str
+    text: str
+    constraints: list[str] = []
+    participants: list[str] = []
+    episode: int = 0
+
+
+class Assignment(msgspec.Struct, frozen=True, kw_only=True, tag="assign"):
+    h: Header
+    mission_id: str
+    uav: str
+    role: str
+    local_goal: str
+    skills: list[str]
+    revision: int = 0
+
+
+class ExperienceRecord(msgspec.Struct, frozen=True, kw_only=True, tag="exp"):
+    """One decision's experience; published so same-role daemons learn from each other."""
+
+    h: Header
+    task: str
+    role: str
+    uav: str
+    episode: int
+    round: int
+    state_text: str
+    skill: str
+    invocation: str
+    reward: float | None = None
+    ret: float | None = None
+    final: bool = False
+    reward_source: str = ""
+
+
+class Entity(msgspec.Struct, frozen=True, kw_only=True):
+    id: str
+    kind: str  # landmark / uav / evader / food / ...
+    pos: Vec3
+    vel: Vec3 = (0.0, 0.0, 0.0)
+    role: str = ""
+
+
+class MsgRef(msgspec.Struct, frozen=True, kw_only=True, array_like=True):
+    sender: str
+    seq: int
+
+
+class SimPerception(msgspec.Struct, frozen=True, kw_only=True, tag="perception"):
+    """Simulator -> one UAV: the round trigger plus what that UAV can sense, frozen."""
+
+    h: Header
+    uav: str
+    episode: int
+    round: int
+    deadline_s: float
+    pos: Vec3
+    vel: Vec3
+    entities: list[Entity] = []
+    expected_inbox: list[MsgRef] = []  # lockstep: messages sent to this UAV last round
+
+
+class SimReward(msgspec.Struct, frozen=True, kw_only=True, tag="reward"):
+    h: Header
+    uav: str
+    episode: int
+    round: int
+    reward: float
+    done: bool = False
+    reason: str = ""
+
+
+class SimCommand(msgspec.Struct, frozen=True, kw_only=True, tag="command"):
+    """One UAV -> simulator: its gated velocity for the round and the messages it sent."""
+
+    h: Header
+    uav: str
+    episode: int
+    round: int
+    vel: Vec3
+    held: bool = False
+    sent: list[MsgRef] = []
+
+
+class SimEpisode(msgspec.Struct, frozen=True, kw_only=True, tag="episode"):
+    """Simulator -> all: an episode has started or ended."""
+
+    h: Header
+    episode: int
+    task: str
+    phase: Literal["start", "end"]
+    reason: str = ""
+
+
+Payload = (
+    StateBeacon
+    | InboxMessage
+    | ProgressReport
+    | MissionContext
+    | Assignment
+    | ExperienceRecord
+    | SimPerception
+    | SimReward
+    | SimCommand
+    | SimEpisode
+)
+
+
+class Keys:
+    """Key expressions of one swarm (DESIGN §3). A UAV writes only under its own prefix or
+    in its own slot of a peer's inbox, which keeps access-control rules simple."""
+
+    def __init__(self, swarm: str) -> None:
+        self.root = f"aw/{swarm}"
+
+    def alive_uav(self, uav: str = "*") -> str:
+        return f"{self.root}/alive/uav/{uav}"
+
+    @property
+    def alive_cmdr(self) -> str:
+        return f"{self.root}/alive/cmdr"
+
+    @property
+    def alive_all(self) -> str:
+        return f"{self.root}/alive/**"
+
+    def state(self, uav: str = "*") -> str:
+        return f"{self.root}/uav/{uav}/state"
+
+    def inbox(self, to: str, sender: str = "*") -> str:
+        return f"{self.root}/uav/{to}/inbox/{sender}"
+
+    def report(self, uav: str = "*") -> str:
+        return f"{self.root}/uav/{uav}/report"
+
+    def experience(self, uav: str = "*") -> str:
+        return f"{self.root}/uav/{uav}/experience"
+
+    @property
+    def context(self) -> str:
+        return f"{self.root}/cmdr/context"
+
+    def assign(self, uav: str = "*") -> str:
+        return f"{self.root}/cmdr/assign/{uav}"
+
+    def sim(self, leaf: str) -> str:
+        return f"{self.root}/sim/{leaf}"
+
+    def sim_perception(self, uav: str = "*") -> str:
+        return self.sim(f"perception/{uav}")
+
+    def sim_reward(self, uav: str = "*") -> str:
+        return self.sim(f"reward/{uav}")
+
+    def sim_command(self, uav: str = "*") -> str:
+        return self.sim(f"command/{uav}")
+
+    @property
+    def sim_episode(self) -> str:
+        return self.sim("episode")
+
+
+def last_chunk(key: str) -> str:
+    return key.rsplit("/", 1)[-1]
+
+
+T = TypeVar("T", bound=msgspec.Struct)
+
+
+class DecodeStats:
+    """Counts rejected payloads and keeps the log quiet (one line per reason per interval)."""
+
+    def __init__(self, log_interval_s: float = 5.0) -> None:
+        self.rejected: Counter[str] = Counter()
+        self._interval = log_interval_s
+        self._last_log: dict[str, float] = {}
+
+    @property
+    def total(self) -> int:
+        return sum(self.rejected.values())
+
+    def reject(self, reason: str, key: str) -> None:
+        self.rejected[reason] += 1
+        now = time.monotonic()
+        if now - self._last_log.get(reason, -1e9) >= self._interval:
+            self._last_log[reason] = now
+            log.warning("dropped payload on %s: %s (%d so far)", key, reason, self.rejected[reason])
+
+
+class Codec:
+    """Encodes our structs; decodes bytes into an expected type or ``None``."""
+
+    def __init__(self, stats: DecodeStats | None = None) -> None:
+        self.stats = stats or DecodeStats()
+        self._encoder = msgspec.msgpack.Encoder()
+        self._decoders: dict[type[Any], msgspec.msgpack.Decoder[Any]] = {}
+
+    def encode(self, msg: msgspec.Struct) -> bytes:
+        data = self._encoder.encode(msg)
+        if len(data) > MAX_PAYLOAD_BYTES:
+            raise ValueError(f"{type(msg).__name__} is {len(data)} bytes, cap {MAX_PAYLOAD_BYTES}")
+        return data
+
+    def decode(self, data: bytes, kind: type[T], key: str = "?") -> T | None:
+        if len(data) > MAX_PAYLOAD_BYTES:
+            self.stats.reject("oversize", key)
+            return None
+        decoder = self._decoders.get(kind)
+        if decoder is None:
+            decoder = self._decoders[kind] = msgspec.msgpack.Decoder(kind)
+        try:
+            msg: T = decoder.decode(data)
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            self.stats.reject(f"undecodable {kind.__name__}: {str(exc)[:80]}", key)
+            return None
+        header = getattr(msg, "h", None)
+        if isinstance(header, Header) and header.v != SCHEMA_VERSION:
+            self.stats.reject(f"schema v{header.v}", key)
+            return None
+        return msg
+
+
+class HeaderFactory:
+    """Stamps outgoing payloads with sender, boot epoch and a strictly increasing sequence."""
+
+    def __init__(self, sender: str, epoch: int | None = None) -> None:
+        self.sender = sender
+        self.epoch = epoch if epoch is not None else time.time_ns()
+        self._seq = 0
+
+    def next(self, ttl_s: float = 10.0) -> Header:
+        self._seq += 1
+        return Header(sender=self.sender, epoch=self.epoch, seq=self._seq, stamp=time.time(), ttl_s=ttl_s)
+
+    @property
+    def last_seq(self) -> int:
+        return self._seq
+
+
+class ReplayFilter:
+    """Delivers each (sender, epoch, seq) at most once; a newer epoch means a restart."""
+
+    def __init__(self) -> None:
+        self._latest: dict[str, tuple[int, int]] = {}
+
+    def accept(self, header: Header) -> bool:
+        prev = self._latest.get(header.sender)
+        cur = (header.epoch, header.seq)
+        if prev is not None and cur <= prev:
+            return False
+        self._latest[header.sender] = cur
+        return True
