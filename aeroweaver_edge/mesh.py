@@ -1,0 +1,477 @@
+"""An asyncio facade over one zenoh-python 1.10 session.
+
+zenoh-python has no asyncio API, so every zenoh callback here does exactly one thing: hand
+its data to the event loop with ``call_soon_threadsafe``. Decoding, validation and query
+replies run on the loop, where exceptions are visible and no zenoh thread is held up.
+
+Callbacks are registered with ``indirect=False``: they run on zenoh's RX thread instead of a
+per-entity Python thread. That keeps the wire order of one link across *all* our
+subscriptions (a peer's liveliness token is seen before its first message), spawns no
+non-daemon threads (no exit hang) and costs nothing that matters at swarm-control rates,
+because the callback is trivial. Opening, undeclaring and closing can block for up to a
+second, so they run in worker threads; ``put`` and issuing a ``get`` do not block (see
+notes/zenoh.md) and stay on the loop so the order of our own puts is kept.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import json
+import logging
+import os
+from collections.abc import AsyncIterator, Callable
+from types import TracebackType
+from typing import Any, Generic, Protocol, Self, TypeVar
+
+import msgspec
+import zenoh
+
+from .config import ConfigError, MeshConfig
+from .wire import Codec
+
+log = logging.getLogger(__name__)
+
+T = TypeVar("T", bound=msgspec.Struct)
+I = TypeVar("I")  # noqa: E741 - item type of a Stream
+
+LivelinessEvent = tuple[str, bool]
+"""``(key, alive)``: True when a token appeared (PUT), False when it went away (DELETE)."""
+
+
+class MeshError(RuntimeError):
+    """The zenoh session could not be opened or used."""
+
+
+class MeshClosed(MeshError):
+    """The mesh (or this subscription) was closed."""
+
+
+class _Undeclarable(Protocol):
+    def undeclare(self) -> Any: ...
+
+
+class _Closable(Protocol):
+    def close(self) -> Any: ...
+
+
+class _Closed(enum.Enum):
+    TOKEN = enum.auto()
+
+
+_CLOSED = _Closed.TOKEN
+
+
+def build_zenoh_config(cfg: MeshConfig) -> zenoh.Config:
+    """Translate a MeshConfig into a zenoh Config (overrides last; a bad one names its key)."""
+    conf = zenoh.Config()
+    settings: list[tuple[str, Any]] = [
+        ("mode", cfg.mode),
+        ("listen/endpoints", cfg.listen),
+        ("connect/endpoints", cfg.connect),
+        ("connect/retry", {"period_init_ms": 100, "period_max_ms": 1000,
+                           "period_increase_factor": 2}),
+        ("scouting/multicast/enabled", cfg.multicast),
+        ("scouting/gossip/enabled", cfg.gossip),
+        ("scouting/delay", 100),
+        ("transport/link/tx/lease", cfg.lease_ms),
+        # zenoh #2628: SHM watchdog race loses query replies under load; our payloads are small.
+        ("transport/shared_memory/enabled", False),
+    ]
+    if cfg.namespace:
+        settings.append(("namespace", cfg.namespace))
+    for path, value in settings:
+        conf.insert_json5(path, json.dumps(value))
+    for path, text in cfg.zenoh_overrides.items():
+        try:
+            conf.insert_json5(path, text)
+        except (zenoh.ZError, TypeError, ValueError) as exc:
+            raise ConfigError(
+                f"mesh.zenoh_overrides[{path!r}] = {text!r}: {_zerror_text(exc)}"
+            ) from None
+    return conf
+
+
+def _zerror_text(exc: Exception) -> str:
+    """A ZError's message without the Rust source location zenoh appends."""
+    return str(exc).split(" at /", 1)[0].strip()
+
+
+_log_initialised = False
+
+
+def _init_zenoh_log() -> None:
+    """Zenoh logs to stdout, so only turn it on when the operator asked (RUST_LOG)."""
+    global _log_initialised
+    if not _log_initialised and os.environ.get("RUST_LOG"):
+        zenoh.try_init_log_from_env()  # type: ignore[no-untyped-call]
+        _log_initialised = True
+
+
+class Declared:
+    """Something declared on the session; ``aclose`` undeclares it (off the loop)."""
+
+    def __init__(self, mesh: Mesh, key: str) -> None:
+        self.key = key
+        self._mesh = mesh
+        self._entity: _Undeclarable | None = None
+        self._closed = False
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def _mark_closed(self) -> None:
+        self._closed = True
+
+    async def aclose(self) -> None:
+        """Undeclare; idempotent. Mesh.aclose does this for everything still declared."""
+        if self._closed:
+            return
+        self._mark_closed()
+        await self._mesh._release(self)
+
+
+class Stream(Declared, Generic[I]):
+    """A bounded queue of items fed from zenoh callbacks.
+
+    When full it drops the *oldest* item (counted in ``dropped``), like zenoh's RingChannel:
+    for latest-wins state and next-round messages the newest data is the useful data.
+    With ``on_item`` set, items go straight to that loop-side function instead, in arrival
+    order, and the queue stays empty.
+    """
+
+    def __init__(
+        self, mesh: Mesh, key: str, maxsize: int, on_item: Callable[[I], object] | None
+    ) -> None:
+        super().__init__(mesh, key)
+        if maxsize < 1:
+            raise ValueError(f"maxsize must be >= 1, got {maxsize}")
+        self.maxsize = maxsize
+        self.received = 0
+        self.dropped = 0
+        self._on_item = on_item
+        self._queue: asyncio.Queue[I | _Closed] = asyncio.Queue()
+
+    def _offer(self, item: I) -> None:
+        if self._closed:
+            return
+        self.received += 1
+        if self._on_item is not None:
+            try:
+                self._on_item(item)
+            except Exception:
+                log.exception("on_item handler for %s failed", self.key)
+            return
+        if self._queue.qsize() >= self.maxsize:
+            self._queue.get_nowait()
+            self.dropped += 1
+        self._queue.put_nowait(item)
+
+    def _mark_closed(self) -> None:
+        if not self._closed:
+            super()._mark_closed()
+            self._queue.put_nowait(_CLOSED)
+
+    async def get(self) -> I:
+        """The next item; raises MeshClosed once closed and empty."""
+        item = await self._queue.get()
+        if item is _CLOSED:
+            self._queue.put_nowait(_CLOSED)  # keep waking every other waiter
+            raise MeshClosed(f"{self.key} is closed")
+        return item
+
+    def drain(self) -> list[I]:
+        """Everything queued right now, without waiting."""
+        out: list[I] = []
+        while not self._queue.empty():
+            item = self._queue.get_nowait()
+            if item is _CLOSED:
+                self._queue.put_nowait(_CLOSED)
+                break
+            out.append(item)
+        return out
+
+    def __aiter__(self) -> AsyncIterator[I]:
+        return self._iterate()
+
+    async def _iterate(self) -> AsyncIterator[I]:
+        while True:
+            try:
+                yield await self.get()
+            except MeshClosed:
+                return
+
+
+class Subscription(Stream[tuple[str, T]], Generic[T]):
+    """Decoded ``(key, msg)`` pairs; undecodable payloads are counted and skipped."""
+
+    def __init__(
+        self,
+        mesh: Mesh,
+        key: str,
+        kind: type[T],
+        maxsize: int,
+        on_item: Callable[[tuple[str, T]], object] | None,
+    ) -> None:
+        super().__init__(mesh, key, maxsize, on_item)
+        self.kind = kind
+        self.undecodable = 0
+
+    def _deliver(self, key: str, data: bytes) -> None:
+        if self._closed:
+            return
+        msg = self._mesh.codec.decode(data, self.kind, key)
+        if msg is None:
+            self.undecodable += 1
+            return
+        self._offer((key, msg))
+
+
+class LivelinessWatch(Stream[LivelinessEvent]):
+    """``(key, alive)`` events for liveliness tokens, starting with those already alive."""
+
+
+class Queryable(Declared):
+    """Answers queries on one concrete key with the provider's latest value."""
+
+    def __init__(
+        self, mesh: Mesh, key: str, provider: Callable[[], msgspec.Struct | None]
+    ) -> None:
+        super().__init__(mesh, key)
+        self._provider = provider
+        self.answered = 0
+
+    def _answer(self, query: zenoh.Query) -> None:
+        try:
+            if not self._closed:
+                value = self._provider()
+                if value is not None:
+                    query.reply(self.key, self._mesh.codec.encode(value))
+                    self.answered += 1
+        except Exception:
+            log.exception("queryable %s failed to answer", self.key)
+        finally:
+            # Ends the querier's get now instead of at its timeout.
+            query.drop()  # type: ignore[no-untyped-call]
+
+
+class Mesh:
+    """One zenoh session with asyncio-friendly declarations. Create with ``await Mesh.open``."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        *,
+        node_id: str,
+        codec: Codec,
+        loop: asyncio.AbstractEventLoop,
+    ) -> None:
+        self.node_id = node_id
+        self.codec = codec
+        self._session = session
+        self._loop = loop
+        self._declared: list[Declared] = []
+        self._closing: asyncio.Task[None] | None = None
+
+    @classmethod
+    async def open(cls, cfg: MeshConfig, *, node_id: str, codec: Codec | None = None) -> Mesh:
+        """Open a session in a worker thread (zenoh.open blocks up to scouting.delay)."""
+        _init_zenoh_log()
+        conf = build_zenoh_config(cfg)
+        try:
+            session = await asyncio.to_thread(zenoh.open, conf)
+        except zenoh.ZError as exc:
+            raise MeshError(
+                f"{node_id}: cannot open zenoh session (mode={cfg.mode}, listen={cfg.listen}, "
+                f"connect={cfg.connect}): {_zerror_text(exc)}"
+            ) from None
+        log.debug("%s: zenoh session %s open", node_id, session.zid())
+        loop = asyncio.get_running_loop()
+        return cls(session, node_id=node_id, codec=codec or Codec(), loop=loop)
+
+    @property
+    def session(self) -> zenoh.Session:
+        """The raw session, for what this facade does not cover (tests, diagnostics)."""
+        return self._session
+
+    @property
+    def closed(self) -> bool:
+        return self._closing is not None
+
+    def _check_open(self) -> None:
+        if self._closing is not None:
+            raise MeshClosed(f"{self.node_id}: mesh is closed")
+
+    def _to_loop(self, fn: Callable[..., None], *args: Any) -> None:
+        """The one thing a zenoh callback may do: schedule work on the loop."""
+        with contextlib.suppress(RuntimeError):  # loop closed: the mesh is going away anyway
+            self._loop.call_soon_threadsafe(fn, *args)
+
+    def _register(self, handle: Declared, entity: _Undeclarable) -> None:
+        handle._entity = entity
+        self._declared.append(handle)
+
+    # -- publishing -------------------------------------------------------------------------
+
+    def put(self, key: str, msg: msgspec.Struct, *, block: bool = False) -> None:
+        """Encode and publish. DROP congestion control unless ``block`` (important, low rate)."""
+        self.put_bytes(key, self.codec.encode(msg), block=block)
+
+    def put_bytes(self, key: str, data: bytes, *, block: bool = False) -> None:
+        self._check_open()
+        cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        self._session.put(key, data, congestion_control=cc)
+
+    # -- subscribing ------------------------------------------------------------------------
+
+    def subscribe(
+        self,
+        key_expr: str,
+        kind: type[T],
+        *,
+        maxsize: int = 1024,
+        on_item: Callable[[tuple[str, T]], object] | None = None,
+    ) -> Subscription[T]:
+        """Subscribe to ``key_expr``, decoding payloads as ``kind`` on the loop."""
+        self._check_open()
+        sub: Subscription[T] = Subscription(self, key_expr, kind, maxsize, on_item)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            self._to_loop(sub._deliver, str(sample.key_expr), sample.payload.to_bytes())
+
+        handler = zenoh.handlers.Callback(on_sample, indirect=False)
+        self._register(sub, self._session.declare_subscriber(key_expr, handler))
+        return sub
+
+    def watch_liveliness(
+        self,
+        key_expr: str,
+        *,
+        maxsize: int = 1024,
+        on_item: Callable[[LivelinessEvent], object] | None = None,
+    ) -> LivelinessWatch:
+        """Liveliness PUT/DELETE events as ``(key, alive)``, with tokens already alive first."""
+        self._check_open()
+        watch = LivelinessWatch(self, key_expr, maxsize, on_item)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            alive = sample.kind == zenoh.SampleKind.PUT
+            self._to_loop(watch._offer, (str(sample.key_expr), alive))
+
+        handler = zenoh.handlers.Callback(on_sample, indirect=False)
+        sub = self._session.liveliness().declare_subscriber(key_expr, handler, history=True)
+        self._register(watch, sub)
+        return watch
+
+    def declare_token(self, key: str) -> Declared:
+        """A liveliness token: peers see it until ``aclose`` or the session goes away."""
+        self._check_open()
+        handle = Declared(self, key)
+        self._register(handle, self._session.liveliness().declare_token(key))
+        return handle
+
+    # -- queries ----------------------------------------------------------------------------
+
+    def declare_queryable(
+        self, key: str, provider: Callable[[], msgspec.Struct | None]
+    ) -> Queryable:
+        """Serve ``provider()`` on the concrete ``key``; ``None`` means no reply."""
+        self._check_open()
+        if "*" in key or "$" in key:
+            raise ValueError(f"queryable key must be concrete (replies use it): {key!r}")
+        queryable = Queryable(self, key, provider)
+
+        def on_query(query: zenoh.Query) -> None:
+            self._to_loop(queryable._answer, query)
+
+        handler = zenoh.handlers.Callback(on_query, indirect=False)
+        self._register(queryable, self._session.declare_queryable(key, handler))
+        return queryable
+
+    async def get(
+        self, selector: str, kind: type[T], timeout_s: float = 1.0
+    ) -> list[tuple[str, T]]:
+        """Query every matching queryable; returns decoded replies (bad ones skipped)."""
+        self._check_open()
+        raw: list[tuple[str, bytes]] = []
+        done: asyncio.Future[None] = self._loop.create_future()
+
+        def finish() -> None:
+            if not done.done():
+                done.set_result(None)
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            sample = reply.ok
+            if sample is not None:
+                self._to_loop(raw.append, (str(sample.key_expr), sample.payload.to_bytes()))
+
+        def on_done() -> None:
+            self._to_loop(finish)
+
+        self._session.get(
+            selector,
+            zenoh.handlers.Callback(on_reply, on_done, indirect=False),
+            target=zenoh.QueryTarget.ALL,
+            timeout=timeout_s,
+        )
+        # zenoh ends the query itself at timeout_s; the margin only guards a lost on_done.
+        await asyncio.wait({done}, timeout=timeout_s + 0.5)
+        out: list[tuple[str, T]] = []
+        for key, data in raw:
+            msg = self.codec.decode(data, kind, key)
+            if msg is not None:
+                out.append((key, msg))
+        return out
+
+    # -- closing ----------------------------------------------------------------------------
+
+    async def _release(self, handle: Declared) -> None:
+        """Undeclare one handle (already marked closed) in a worker thread."""
+        if handle in self._declared:
+            self._declared.remove(handle)
+        entity, handle._entity = handle._entity, None
+        if entity is not None and self._closing is None:
+            await asyncio.to_thread(_undeclare_all, [entity])
+
+    async def aclose(self) -> None:
+        """Undeclare everything (tokens first) and close the session; idempotent."""
+        if self._closing is None:
+            handles, self._declared = self._declared, []
+            # Tokens (plain Declared) first, so peers see us leave before our subscriptions go.
+            handles.sort(key=lambda h: isinstance(h, (Stream, Queryable)))
+            entities = []
+            for handle in handles:
+                handle._mark_closed()  # wakes waiters; late callbacks are ignored
+                if handle._entity is not None:
+                    entities.append(handle._entity)
+                    handle._entity = None
+            work = asyncio.to_thread(_undeclare_all, entities, self._session)
+            self._closing = asyncio.ensure_future(work)
+            self._closing.add_done_callback(lambda _: log.debug("%s: closed", self.node_id))
+        await asyncio.shield(self._closing)
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.aclose()
+
+
+def _undeclare_all(entities: list[_Undeclarable], session: _Closable | None = None) -> None:
+    """Worker-thread side of closing: undeclare may wait for in-flight callbacks."""
+    try:
+        for entity in entities:
+            try:
+                entity.undeclare()
+            except zenoh.ZError as exc:
+                log.debug("undeclare failed: %s", exc)
+    finally:
+        if session is not None:
+            session.close()

@@ -1,0 +1,207 @@
+"""PeerLink over real zenoh sessions on loopback (no mocks)."""
+
+from __future__ import annotations
+
+import asyncio
+
+from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.peers import PeerLink
+from aeroweaver_edge.wire import (
+    Header,
+    HeaderFactory,
+    InboxMessage,
+    Keys,
+    MsgRef,
+    StateBeacon,
+    Vec3,
+)
+from tests.helpers.zenoh_net import ZenohNet, eventually
+
+KEYS = Keys("test")
+STILL: Vec3 = (0.0, 0.0, 0.0)
+
+
+async def join(net: ZenohNet, uav: str, radius_m: float = 55.0) -> tuple[PeerLink, Mesh]:
+    mesh = await net.open(uav)
+    link = PeerLink(mesh, KEYS, uav, HeaderFactory(uav), radius_m)
+    await link.start()
+    return link, mesh
+
+
+async def swarm(net: ZenohNet, *uavs: str) -> dict[str, PeerLink]:
+    links = {uav: (await join(net, uav))[0] for uav in uavs}
+    for uav, link in links.items():
+        assert await link.wait_for_peers(set(uavs) - {uav}, 3.0)
+    return links
+
+
+async def beacons_seen(links: dict[str, PeerLink], round_: int) -> None:
+    """Wait until every link holds every peer's beacon of ``round_``."""
+    def done() -> bool:
+        return all(
+            all(b.round >= round_ for b in link.neighbours.values())
+            and len(link.neighbours) == len(link.roster)
+            for link in links.values()
+        )
+    assert await eventually(done)
+
+
+def message(sender: str, to: str, seq: int, *, round_: int = 1) -> InboxMessage:
+    """A hand-made message, for playing a misbehaving or replaying sender."""
+    header = Header(sender=sender, epoch=1, seq=seq, stamp=0.0)
+    return InboxMessage(h=header, to=to, round=round_, kind="status")
+
+
+async def test_directed_delivery_in_range(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "a", "b")
+    a, b = links["a"], links["b"]
+    a.publish_beacon(1, (0.0, 0.0, -5.0), STILL, role="scout")
+    b.publish_beacon(1, (30.0, 0.0, -5.0), STILL)
+
+    ref = await a.send("b", "status", {"fuel": 0.5, "ok": True}, round=1, min_round=1)
+    assert ref is not None
+    assert ref.sender == "a"
+    [msg] = await b.collect_inbox([ref], timeout_s=2.0)
+    assert (msg.to, msg.kind, msg.round, msg.body) == ("b", "status", 1, {"fuel": 0.5, "ok": True})
+    assert msg.sender_pos == (0.0, 0.0, -5.0)
+    assert (a.stats.sent, b.stats.received) == (1, 1)
+    assert await b.collect_inbox(timeout_s=0.0) == []
+
+
+async def test_radius_rule_and_missing_beacons(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "a", "near", "far", "mute")
+    a = links["a"]
+    a.publish_beacon(1, (0.0, 0.0, -5.0), STILL)
+    links["near"].publish_beacon(1, (0.0, 55.0, -5.0), STILL)  # exactly on the radius
+    links["far"].publish_beacon(1, (0.0, 55.1, -5.0), STILL)
+    assert await eventually(lambda: set(a.neighbours) == {"near", "far"})
+
+    assert await a.send("near", "status", {}, round=1) is not None
+    assert await a.send("far", "status", {}, round=1) is None
+    assert await a.send("mute", "status", {}, round=1) is None  # never published a beacon
+    assert await a.send("ghost", "status", {}, round=1) is None  # not in the roster
+    assert await a.send("near", "status", {}, round=2, min_round=2, wait_s=0.05) is None
+    assert a.stats.dropped == {
+        "out_of_range": 1, "no_beacon": 1, "unknown_peer": 1, "stale_beacon": 1,
+    }
+    assert a.stats.sent == 1
+
+
+async def test_min_round_waits_for_the_recipient_beacon(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "a", "b")
+    a, b = links["a"], links["b"]
+    a.publish_beacon(1, (0.0, 0.0, -5.0), STILL)
+    b.publish_beacon(1, (10.0, 0.0, -5.0), STILL)
+    await beacons_seen(links, 1)
+
+    send = asyncio.create_task(a.send("b", "intent", {}, round=2, min_round=2, wait_s=2.0))
+    await asyncio.sleep(0.05)
+    assert not send.done()
+    b.publish_beacon(2, (10.0, 0.0, -5.0), STILL)
+    ref = await asyncio.wait_for(send, 2.0)
+    assert ref is not None
+    assert len(await b.collect_inbox([ref], timeout_s=2.0)) == 1
+
+
+async def test_spoofed_and_misaddressed_messages_are_rejected(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "a", "b")
+    b = links["b"]
+    mallory = zenoh_net.meshes[0]  # a's session, misbehaving
+    mallory.put(KEYS.inbox("b", "a"), message("c", "b", 1))  # header says c, key says a
+    mallory.put(KEYS.inbox("b", "a"), message("a", "x", 2))  # not for b
+    mallory.put(KEYS.state("a"), StateBeacon(
+        h=HeaderFactory("a").next(), uav="z", round=1, pos=STILL, vel=STILL,
+    ))  # beacon for z on a's key
+    assert await eventually(lambda: b.stats.rejected.total() == 3)
+    assert b.stats.rejected == {"spoofed_sender": 1, "wrong_recipient": 1, "spoofed_beacon": 1}
+    assert await b.collect_inbox(timeout_s=0.0) == []
+    assert "z" not in b.neighbours
+
+
+async def test_replayed_message_is_rejected(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "a", "b")
+    b = links["b"]
+    a_mesh = zenoh_net.meshes[0]
+    first, older = message("a", "b", 5), message("a", "b", 4)
+    for msg in (first, first, older):
+        a_mesh.put(KEYS.inbox("b", "a"), msg, block=True)
+    assert await eventually(lambda: b.stats.rejected.total() == 2)
+    assert b.stats.rejected == {"replay": 2}
+    assert await b.collect_inbox([MsgRef(sender="a", seq=5)]) == [first]
+
+
+async def test_message_from_a_session_without_token_is_rejected(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "b")
+    outsider = await zenoh_net.open("z")
+    watch = outsider.watch_liveliness(KEYS.alive_uav("b"))  # b's inbox exists once seen
+    await asyncio.wait_for(watch.get(), 2.0)
+    outsider.put(KEYS.inbox("b", "z"), message("z", "b", 1), block=True)
+    assert await eventually(lambda: links["b"].stats.rejected == {"unknown_sender": 1})
+
+
+async def test_send_right_after_joining_is_accepted(zenoh_net: ZenohNet) -> None:
+    """The token travels after the inbox subscriber and before any message, on one link."""
+    hub, _ = await join(zenoh_net, "hub")
+    hub.publish_beacon(1, (0.0, 0.0, -5.0), STILL)
+    refs = []
+    for i in range(5):
+        link, _ = await join(zenoh_net, f"j{i}")
+        assert "hub" in link.neighbours  # start() asked hub's state queryable
+        link.publish_beacon(1, (1.0, 0.0, -5.0), STILL)
+        ref = await link.send("hub", "hello", {}, round=1)
+        assert ref is not None
+        refs.append(ref)
+    got = await hub.collect_inbox(refs, timeout_s=2.0)
+    assert [m.h.sender for m in got] == [f"j{i}" for i in range(5)]
+    assert hub.stats.rejected.total() == 0
+
+
+async def test_collect_inbox_orders_counts_missing_and_keeps_later_rounds(
+    zenoh_net: ZenohNet,
+) -> None:
+    links = await swarm(zenoh_net, "a", "b", "c")
+    for i, link in enumerate(links.values()):
+        link.publish_beacon(1, (float(i), 0.0, -5.0), STILL)
+    await beacons_seen(links, 1)
+    a, b, c = links["a"], links["b"], links["c"]
+
+    refs = [
+        await c.send("b", "status", {}, round=1),
+        await a.send("b", "status", {}, round=1),
+        await a.send("b", "status", {}, round=2),
+    ]
+    assert all(refs)
+    expected = [r for r in refs[:2] if r] + [MsgRef(sender="a", seq=999)]
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    got = await b.collect_inbox(expected, timeout_s=0.3, max_round=1)
+    assert 0.25 < loop.time() - t0 < 1.0
+    assert [(m.h.sender, m.round) for m in got] == [("a", 1), ("c", 1)]
+    assert b.stats.missing == 1
+    [later] = await b.collect_inbox(timeout_s=0.0)
+    assert (later.h.sender, later.round) == ("a", 2)
+
+
+async def test_peer_leaving_shrinks_roster_and_blocks_sends(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "a", "b", "c")
+    for link in links.values():
+        link.publish_beacon(1, (0.0, 0.0, -5.0), STILL)
+    await beacons_seen(links, 1)
+    a = links["a"]
+
+    await links["b"].aclose()  # withdraws the token first
+    await links["b"].aclose()
+    assert await eventually(lambda: a.roster == {"c"})
+    assert "b" not in a.neighbours
+    await zenoh_net.meshes[2].aclose()  # c's whole session goes away
+    assert await eventually(lambda: a.roster == frozenset())
+    assert await a.send("b", "status", {}, round=2) is None
+    assert await a.send("c", "status", {}, round=2) is None
+    assert a.stats.dropped == {"unknown_peer": 2}
+
+
+async def test_state_queryable_serves_own_beacon(zenoh_net: ZenohNet) -> None:
+    links = await swarm(zenoh_net, "a", "b")
+    own = links["a"].publish_beacon(4, (1.0, 2.0, -5.0), STILL, role="relay")
+    replies = await zenoh_net.meshes[1].get(KEYS.state("a"), StateBeacon, timeout_s=2.0)
+    assert replies == [(KEYS.state("a"), own)]
