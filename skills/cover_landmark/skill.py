@@ -1,0 +1,33 @@
+"""cover_landmark: fly over a visible landmark and announce it to reachable peers."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from aeroweaver_edge.actions import HOLD, Intent, MoveTo, Outgoing
+from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+
+NAME = "cover_landmark"
+
+
+class Params(SkillParams):
+    target_id: str = Field(min_length=1, description="id of a landmark visible now")
+
+
+def options(obs: Observation, ctx: SkillContext) -> list[Params]:
+    """One option per landmark in sensing range: the only ones the UAV can aim for."""
+    return [Params(target_id=e.id) for e in obs.of_kind("landmark")]
+
+
+def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
+    """Move to the landmark at the fixed altitude; hold if it is no longer visible."""
+    landmark = obs.entity(params.target_id)
+    if landmark is None or landmark.kind != "landmark":
+        return HOLD
+    north, east = landmark.pos[0], landmark.pos[1]
+    announce = Outgoing(
+        to="*",
+        kind="intent",
+        body={"skill": NAME, "target_id": landmark.id, "north": north, "east": east},
+    )
+    return Intent(MoveTo((north, east, -ctx.altitude_m)), messages=(announce,))
