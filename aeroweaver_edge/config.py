@@ -6,6 +6,7 @@ error naming the key, not a silently ignored setting.
 
 from __future__ import annotations
 
+import json
 import tomllib
 from pathlib import Path
 from typing import Any, Literal, TypeVar
@@ -89,6 +90,7 @@ class SafetyConfig(_Section):
 class VehicleConfig(_Section):
     backend: Literal["sim", "mavlink", "mavsdk"] = "sim"
     url: str | None = None  # e.g. udpin://0.0.0.0:14540 for mavlink
+    altitude_m: float = Field(default=5.0, gt=0)  # mission flight level
 
 
 class UavConfig(_Section):
@@ -96,6 +98,8 @@ class UavConfig(_Section):
 
     uav: str
     swarm: str = "default"
+    index: int | None = Field(default=None, ge=0)  # None: the trailing digits of the id
+    round_s: float = Field(default=0.5, gt=0)
     mesh: MeshConfig = MeshConfig()
     llm: LLMConfig = LLMConfig()
     agent: AgentConfig = AgentConfig()
@@ -106,6 +110,13 @@ class UavConfig(_Section):
     @classmethod
     def _uav_id(cls, value: str) -> str:
         return _check_id(value, "uav id")
+
+    @property
+    def uav_index(self) -> int:
+        if self.index is not None:
+            return self.index
+        digits = self.uav[len(self.uav.rstrip("0123456789")) :]
+        return int(digits) if digits else 0
 
     @field_validator("swarm")
     @classmethod
@@ -151,12 +162,16 @@ def parse_config(data: dict[str, Any], model: type[M], source: str = "<config>")
 
 
 def load_config(path: str | Path, model: type[M]) -> M:
-    """Read a TOML file into ``model``; any problem becomes a ``ConfigError``."""
+    """Read a TOML (or, by suffix, JSON) file into ``model``; any problem is a ``ConfigError``."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: the top level must be a table of settings")
     return parse_config(data, model, str(path))

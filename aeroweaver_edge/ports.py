@@ -9,7 +9,7 @@ from typing import Protocol
 
 from aeroweaver_edge.agent.scoring import LabelScores
 from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.wire import Entity, MsgRef
 
 
 @dataclass(frozen=True)
@@ -39,11 +39,17 @@ class RoundTick:
     episode: int
     round: int
     deadline_s: float  # seconds this round may take before the UAV is treated as holding
+    expect: tuple[MsgRef, ...] = ()  # lockstep: peer messages known to be on their way
 
 
 class Clock(Protocol):
     async def next_round(self) -> RoundTick | None:
         """Wait for the next round; ``None`` when the run is over."""
+        ...
+
+    async def finish(self, tick: RoundTick, sent: Sequence[MsgRef]) -> None:
+        """Close the round. A wall clock does nothing; a lockstep simulator learns that
+        this UAV is done and which messages it sent, so recipients can wait for them."""
         ...
 
 

@@ -60,7 +60,10 @@ class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
 
 
 class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
+    """Per-round progress, or (``phase="ready"``) the ack that a UAV holds its assignment."""
+
     h: Header
+    phase: Literal["round", "ready"] = "round"
     uav: str
     mission_id: str
     episode: int
@@ -77,6 +80,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     latency_s: float = 0.0
     messages_sent: int = 0
     messages_dropped: int = 0
+    decode_errors: int = 0  # cumulative payloads this daemon rejected
+    corrected: bool = False  # the experience correction changed the pick
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):
@@ -128,8 +133,11 @@ class Entity(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class MsgRef(msgspec.Struct, frozen=True, kw_only=True, array_like=True):
+    """Identifies one directed message: (sender, seq) is unique; ``to`` routes the manifest."""
+
     sender: str
     seq: int
+    to: str = ""
 
 
 class SimPerception(msgspec.Struct, frozen=True, kw_only=True, tag="perception"):
@@ -174,7 +182,7 @@ class SimEpisode(msgspec.Struct, frozen=True, kw_only=True, tag="episode"):
     h: Header
     episode: int
     task: str
-    phase: Literal["start", "end"]
+    phase: Literal["start", "end", "shutdown"]
     reason: str = ""
 
 

@@ -1,0 +1,59 @@
+"""Enumerate every callable (skill, parameters) pair and give each a single-token label."""
+
+from __future__ import annotations
+
+import string
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from aeroweaver_edge.observation import Observation
+from aeroweaver_edge.ports import Candidate
+from aeroweaver_edge.skill_api import SkillContext, SkillParams
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.skills import SkillRegistry
+
+LABELS = tuple(string.ascii_uppercase)
+
+
+@dataclass(frozen=True)
+class CandidateSet:
+    candidates: tuple[Candidate, ...]
+    params: dict[str, SkillParams]  # label -> validated parameter object
+    overflow: int = 0  # options beyond the label budget; any overflow means hold
+
+    @property
+    def labels(self) -> list[str]:
+        return [c.label for c in self.candidates]
+
+
+def build_candidates(
+    registry: SkillRegistry,
+    active: Sequence[str],
+    obs: Observation,
+    ctx: SkillContext,
+    max_labels: int = len(LABELS),
+) -> CandidateSet:
+    """One candidate per option of each active skill, in the order the skills were
+    activated, deduplicated by invocation text and lettered A, B, C, ..."""
+    seen: set[str] = set()
+    found: list[tuple[str, SkillParams, str]] = []
+    for name in active:
+        if name not in registry:
+            continue
+        skill = registry.get(name)
+        for params in skill.options(obs, ctx):
+            text = params.invocation(name)
+            if text not in seen:
+                seen.add(text)
+                found.append((name, params, text))
+    budget = min(max_labels, len(LABELS))
+    if len(found) > budget:
+        return CandidateSet((), {}, overflow=len(found) - budget)
+    cands = []
+    params_by_label: dict[str, SkillParams] = {}
+    for label, (name, params, text) in zip(LABELS, found, strict=False):
+        cands.append(Candidate(label=label, skill=name, params=params.model_dump(), text=text))
+        params_by_label[label] = params
+    return CandidateSet(tuple(cands), params_by_label)

@@ -1,0 +1,103 @@
+"""Assembles one daemon from its config: mesh, backends for each port, selector, memory.
+
+Used both by ``aeroweaver daemon --config`` (one process per UAV) and by the simulated
+swarm (several daemons in one event loop, each with its own Zenoh session).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass
+
+from aeroweaver_edge.agent.scripted import NearestUncoveredScorer
+from aeroweaver_edge.config import ConfigError, UavConfig
+from aeroweaver_edge.daemon import DaemonPorts, DaemonStats, UavDaemon
+from aeroweaver_edge.decision_round import RoundOutcome
+from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.ports import Selector
+from aeroweaver_edge.skills import SkillRegistry, load_skills
+from aeroweaver_edge.wire import HeaderFactory, Keys
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SelectorInfo:
+    name: str
+    model: str | None = None
+    probe: str | None = None  # the endpoint probe's one-line verdict
+
+
+@contextlib.asynccontextmanager
+async def open_selector(cfg: UavConfig, agent_name: str) -> AsyncIterator[tuple[Selector, SelectorInfo]]:
+    """The selector named in config; an LLM endpoint is probed once before use."""
+    if cfg.agent.selector == "scripted":
+        yield NearestUncoveredScorer(), SelectorInfo(NearestUncoveredScorer.name)
+        return
+    from aeroweaver_edge.agent.llm_selector import LLMSelector
+    from aeroweaver_edge.llm.client import ChatClient
+    from aeroweaver_edge.llm.embedded import EmbeddedServer
+    from aeroweaver_edge.llm.probe import probe_endpoint
+
+    async with contextlib.AsyncExitStack() as stack:
+        llm = cfg.llm
+        if llm.base_url is None:
+            server = await stack.enter_async_context(EmbeddedServer())
+            llm = llm.model_copy(update={"base_url": server.base_url, "model": server.model})
+        client = await stack.enter_async_context(ChatClient.from_config(llm))
+        probe = await probe_endpoint(client)
+        log.info("%s: LLM endpoint %s: %s", agent_name, llm.base_url, probe.summary())
+        selector = LLMSelector(client, llm, probe, agent=agent_name)
+        try:
+            yield selector, SelectorInfo(f"llm:{llm.model}", llm.model, probe.summary())
+        finally:
+            await selector.aclose()
+
+
+def _ports(cfg: UavConfig, mesh: Mesh, headers: HeaderFactory) -> tuple[DaemonPorts, Callable[[], Awaitable[None]], Callable[[], Awaitable[None]]]:
+    if cfg.vehicle.backend == "sim":
+        from aeroweaver_edge.vehicle.sim import SimLink
+
+        link = SimLink(mesh, Keys(cfg.swarm), cfg.uav, headers)
+        return DaemonPorts(link, link, link, link), link.start, link.aclose
+    raise ConfigError(
+        f"vehicle.backend: {cfg.vehicle.backend!r} is not available in this release; use 'sim'"
+    )
+
+
+async def run_daemon(
+    cfg: UavConfig,
+    *,
+    registry: SkillRegistry | None = None,
+    selector: Selector | None = None,
+    on_round: Callable[[RoundOutcome], Awaitable[None]] | None = None,
+    on_ready: Callable[[UavDaemon], None] | None = None,
+) -> DaemonStats:
+    """Run one daemon until its clock ends the run. Every resource is closed on the way out."""
+    registry = registry or load_skills()
+    headers = HeaderFactory(cfg.uav)
+    async with contextlib.AsyncExitStack() as stack:
+        mesh = await Mesh.open(cfg.mesh, node_id=cfg.uav)
+        stack.push_async_callback(mesh.aclose)
+        ports, start, stop = _ports(cfg, mesh, headers)
+        await start()
+        stack.push_async_callback(stop)
+        if selector is None:
+            selector, _info = await stack.enter_async_context(open_selector(cfg, cfg.uav))
+        memory = None
+        if cfg.agent.beta > 0 or cfg.agent.memory_path is not None:
+            from aeroweaver_edge.agent.memory import AsyncExperienceMemory
+
+            memory = await AsyncExperienceMemory.from_config(cfg.agent)
+            stack.push_async_callback(memory.aclose)
+        daemon = UavDaemon(
+            cfg, mesh=mesh, ports=ports, selector=selector, registry=registry, headers=headers,
+            memory=memory, uav_index=cfg.uav_index, altitude_m=cfg.vehicle.altitude_m,
+            round_s=cfg.round_s, on_round=on_round,
+        )
+        if on_ready is not None:
+            on_ready(daemon)
+        return await daemon.run()
+    raise AssertionError("unreachable")  # pragma: no cover

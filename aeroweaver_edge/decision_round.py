@@ -1,0 +1,196 @@
+"""One decision round of a UAV daemon (DESIGN §4): observe, list candidates, select,
+gate, execute on the own body, talk, report. Anything invalid becomes a hold of this UAV.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from aeroweaver_edge.actions import HOLD, Intent
+from aeroweaver_edge.agent.candidates import CandidateSet, build_candidates
+from aeroweaver_edge.agent.describe import describe
+from aeroweaver_edge.agent.scoring import Choice, LabelScores, choose
+from aeroweaver_edge.config import AgentConfig
+from aeroweaver_edge.observation import MissionView, Observation
+from aeroweaver_edge.ports import DecisionRequest, Perception, RoundTick, Selector, Vehicle
+from aeroweaver_edge.safety_gate import GatedCommand, SafetyGate
+from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.wire import MsgRef, Vec3
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.agent.memory import AsyncExperienceMemory
+    from aeroweaver_edge.peers import PeerLink
+    from aeroweaver_edge.skills import SkillRegistry
+
+log = logging.getLogger(__name__)
+
+HOLD_SKILL = "hold_position"
+DEADLINE_MARGIN_S = 0.25  # leave the simulator / setpoint stream time to receive the command
+
+
+@dataclass(frozen=True)
+class RoundOutcome:
+    episode: int
+    round: int
+    skill: str
+    invocation: str
+    label: str | None
+    held: bool
+    hold_reason: str | None
+    reason: str
+    vel: Vec3
+    state_text: str = ""
+    corrected: bool = False
+    sent: tuple[MsgRef, ...] = ()
+    dropped: int = 0
+    scores: LabelScores | None = None
+    n_candidates: int = 0
+    latency_s: float = 0.0
+    violations: tuple[str, ...] = ()
+    chosen_by_agent: bool = False  # False when an error, not the selector, produced the hold
+    memo: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class RoundContext:
+    """Everything a round needs that outlives it."""
+
+    uav: str
+    uav_index: int
+    registry: SkillRegistry
+    selector: Selector
+    gate: SafetyGate
+    vehicle: Vehicle
+    perception: Perception
+    link: PeerLink
+    agent: AgentConfig
+    memory: AsyncExperienceMemory | None = None
+    altitude_m: float = 5.0
+    sensing_radius_m: float = 45.0
+    inbox_wait_s: float = 1.0
+    memo: dict[str, str] = field(default_factory=dict)
+
+
+async def _advantages(rc: RoundContext, view: MissionView, state_text: str, cs: CandidateSet) -> dict[str, float]:
+    if rc.memory is None or rc.agent.beta == 0:
+        return {}
+    by_skill: Mapping[str, float] = await rc.memory.advantages(
+        view.task, view.role, state_text, {c.skill for c in cs.candidates}
+    )
+    return {c.label: by_skill.get(c.skill, 0.0) for c in cs.candidates}
+
+
+def _execute(rc: RoundContext, skill: str, cs: CandidateSet, choice: Choice, obs: Observation, ctx: SkillContext) -> Intent:
+    assert choice.label is not None
+    try:
+        return rc.registry.get(skill).execute(cs.params[choice.label], obs, ctx)
+    except Exception:  # an executor bug must not take the UAV with it
+        log.exception("%s: executor %s failed; holding", rc.uav, skill)
+        return HOLD
+
+
+async def _apply(rc: RoundContext, gated: GatedCommand) -> None:
+    if gated.held:
+        await rc.vehicle.hold()
+    else:
+        await rc.vehicle.set_velocity(*gated.vel)
+
+
+async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None) -> RoundOutcome:
+    """Run one round inside the tick's deadline; a missed deadline holds this UAV only."""
+    started = time.monotonic()
+    budget = max(0.05, tick.deadline_s - DEADLINE_MARGIN_S)
+    try:
+        async with asyncio.timeout(budget):
+            out = await _decide_and_act(rc, tick, view, started)
+    except TimeoutError:
+        await rc.vehicle.hold()
+        out = RoundOutcome(
+            tick.episode, tick.round, HOLD_SKILL, "hold_position()", None, True,
+            f"missed the {budget:.1f} s round deadline", "deadline", (0.0, 0.0, 0.0),
+            latency_s=time.monotonic() - started,
+        )
+    return out
+
+
+def _held(tick: RoundTick, why: str, state_text: str, started: float, **kw: object) -> RoundOutcome:
+    return RoundOutcome(
+        tick.episode, tick.round, HOLD_SKILL, "hold_position()", None, True, why, why,
+        (0.0, 0.0, 0.0), state_text=state_text, latency_s=time.monotonic() - started, **kw,  # type: ignore[arg-type]
+    )
+
+
+async def _decide_and_act(rc: RoundContext, tick: RoundTick, view: MissionView | None, started: float) -> RoundOutcome:
+    # 2. Observe, frozen for the round.
+    own, entities = await rc.perception.sense(tick)
+    rc.link.publish_beacon(
+        round=tick.round, pos=own.pos, vel=own.vel,
+        role=view.role if view else "", status="nominal" if view else "waiting",
+    )
+    messages = await rc.link.collect_inbox(
+        expect=tick.expect, timeout_s=rc.inbox_wait_s, max_round=tick.round - 1
+    )
+    obs = Observation(rc.uav, tick.episode, tick.round, own, tuple(entities), tuple(messages), dict(rc.memo))
+    state_text = describe(obs)
+    if view is None:
+        await rc.vehicle.hold()
+        return _held(tick, "no mission assignment yet", state_text, started)
+
+    # 3. Candidates from the active subset.
+    ctx = SkillContext(
+        uav=rc.uav, uav_index=rc.uav_index, role=view.role, task=view.task,
+        altitude_m=rc.altitude_m, sensing_radius_m=rc.sensing_radius_m,
+    )
+    cs = build_candidates(rc.registry, view.skills, obs, ctx, rc.agent.max_labels)
+    if cs.overflow:
+        await rc.vehicle.hold()
+        return _held(tick, f"{cs.overflow} options beyond the label budget", state_text, started)
+    if not cs.candidates:
+        await rc.vehicle.hold()
+        return _held(tick, "no callable skill in the active subset", state_text, started)
+
+    # 4. Select: base scores from the selector, corrected by experience.
+    request = DecisionRequest(
+        observation=obs, mission_text=view.text, role=view.role, local_goal=view.local_goal,
+        constraints=view.constraints,
+        skill_docs=[rc.registry.get(s).prompt_text() for s in view.skills if s in rc.registry],
+        observation_text=state_text, candidates=cs.candidates,
+    )
+    scores = await rc.selector.score(request)
+    advantages = await _advantages(rc, view, state_text, cs)
+    choice = choose(scores, cs.labels, advantages, rc.agent.beta)
+    if choice.label is None:
+        await rc.vehicle.hold()
+        return _held(tick, choice.reason, state_text, started, scores=scores, n_candidates=len(cs.candidates))
+    cand = next(c for c in cs.candidates if c.label == choice.label)
+
+    # 5. Gate and execute on this UAV's own vehicle only.
+    intent = _execute(rc, cand.skill, cs, choice, obs, ctx)
+    neighbours = [e.pos for e in obs.peers()]
+    gated = rc.gate.gate(intent.motion, own.pos, neighbours)
+    await _apply(rc, gated)
+    rc.memo.update(intent.memo)
+
+    # 6. Talk: directed messages to named (or all reachable) peers.
+    sent: list[MsgRef] = []
+    dropped = 0
+    for m in intent.messages:
+        targets = sorted(rc.link.roster - {rc.uav}) if m.to == "*" else [m.to]
+        for to in targets:
+            ref = await rc.link.send(to, m.kind, dict(m.body), round=tick.round, min_round=tick.round)
+            if ref is None:
+                dropped += 1
+            else:
+                sent.append(ref)
+    return RoundOutcome(
+        tick.episode, tick.round, cand.skill, cand.text, cand.label, gated.held,
+        "; ".join(gated.violations) if gated.held else None, choice.reason, gated.vel,
+        state_text=state_text, corrected=choice.corrected, sent=tuple(sent), dropped=dropped,
+        scores=scores, n_candidates=len(cs.candidates), latency_s=time.monotonic() - started,
+        violations=gated.violations, chosen_by_agent=True, memo=dict(intent.memo),
+    )

@@ -1,0 +1,107 @@
+"""The safety gate: every motion passes here before it reaches the UAV's own vehicle.
+
+It knows nothing about LLMs or skills. It turns an intent into one velocity setpoint that
+fits the envelope (geofence, altitude band, speed cap, minimum separation from neighbours'
+last known positions), clamping where a clamp is safe and holding where it is not.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from aeroweaver_edge.actions import Hold, Motion, MoveTo, SetVelocity
+from aeroweaver_edge.config import SafetyConfig
+from aeroweaver_edge.wire import Vec3
+
+ZERO: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class GatedCommand:
+    vel: Vec3
+    held: bool
+    violations: tuple[str, ...] = ()
+
+
+def _finite(v: Sequence[float]) -> bool:
+    return all(math.isfinite(x) for x in v)
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return min(max(x, lo), hi)
+
+
+class SafetyGate:
+    def __init__(self, cfg: SafetyConfig, horizon_s: float) -> None:
+        """``horizon_s`` is how far ahead a setpoint is checked: one decision round."""
+        self.cfg = cfg
+        self.horizon_s = horizon_s
+
+    def _inside(self, p: Vec3) -> Vec3:
+        c = self.cfg
+        alt_lo, alt_hi = c.altitude_band_m
+        return (
+            _clip(p[0], *c.geofence_north_m),
+            _clip(p[1], *c.geofence_east_m),
+            _clip(p[2], -alt_hi, -alt_lo),
+        )
+
+    def gate(self, motion: Motion, pos: Vec3, neighbours: Sequence[Vec3] = ()) -> GatedCommand:
+        if isinstance(motion, Hold):
+            return GatedCommand(ZERO, held=True)
+        if not _finite(pos):
+            return GatedCommand(ZERO, True, ("own position not finite",))
+        notes: list[str] = []
+        if isinstance(motion, MoveTo):
+            if not _finite(motion.target) or (motion.speed is not None and not math.isfinite(motion.speed)):
+                return GatedCommand(ZERO, True, ("non-finite target",))
+            target = self._inside(motion.target)
+            if target != motion.target:
+                notes.append("target clamped into envelope")
+            delta = tuple(t - p for t, p in zip(target, pos, strict=True))
+            dist = math.sqrt(sum(d * d for d in delta))
+            cap = self.cfg.max_speed_mps if motion.speed is None else min(motion.speed, self.cfg.max_speed_mps)
+            speed = min(cap, dist / self.horizon_s)
+            vel: Vec3 = ZERO if dist < 1e-9 else (
+                delta[0] / dist * speed,
+                delta[1] / dist * speed,
+                delta[2] / dist * speed,
+            )
+        elif isinstance(motion, SetVelocity):
+            if not _finite(motion.vel):
+                return GatedCommand(ZERO, True, ("non-finite velocity",))
+            vel = motion.vel
+        else:  # pragma: no cover - exhaustive over Motion
+            return GatedCommand(ZERO, True, (f"unknown motion {type(motion).__name__}",))
+
+        speed = math.sqrt(sum(v * v for v in vel))
+        if speed > self.cfg.max_speed_mps:
+            k = self.cfg.max_speed_mps / speed
+            vel = (vel[0] * k, vel[1] * k, vel[2] * k)
+            notes.append("speed capped")
+
+        # Keep the predicted position inside the envelope (a velocity can carry us out).
+        ahead = tuple(p + v * self.horizon_s for p, v in zip(pos, vel, strict=True))
+        inside = self._inside((ahead[0], ahead[1], ahead[2]))
+        if inside != ahead:
+            vel = (
+                (inside[0] - pos[0]) / self.horizon_s,
+                (inside[1] - pos[1]) / self.horizon_s,
+                (inside[2] - pos[2]) / self.horizon_s,
+            )
+            notes.append("velocity clamped at envelope edge")
+
+        # Never close in on a neighbour that is already, or would become, too near.
+        sep = self.cfg.min_separation_m
+        if sep > 0:
+            nxt = tuple(p + v * self.horizon_s for p, v in zip(pos, vel, strict=True))
+            for other in neighbours:
+                if not _finite(other):
+                    continue
+                now_d = math.dist(pos, other)
+                next_d = math.dist(nxt, other)
+                if next_d < sep and next_d < now_d:
+                    return GatedCommand(ZERO, True, (*notes, f"separation {next_d:.1f} m < {sep} m"))
+        return GatedCommand(vel, held=False, violations=tuple(notes))

@@ -1,0 +1,69 @@
+"""The live per-round view of a simulated run and its final summary, for a terminal."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from aeroweaver_edge.sim.runner import RoundLog
+from commander.progress import ProgressBoard
+
+
+class LiveView:
+    """Prints one compact block per round; works on a TTY and in a log file alike."""
+
+    def __init__(self, console: Console | None = None) -> None:
+        self.console = console or Console(stderr=False, highlight=False)
+
+    async def on_round(self, log: RoundLog, board: ProgressBoard) -> None:
+        res = log.result
+        parts = []
+        for uav in sorted(res.rewards):
+            rep = board.uavs.get(uav)
+            last = rep.last if rep else None
+            what = "absent" if uav in log.absent else ("missed" if uav in log.missed else "")
+            if not what and last is not None and (last.episode, last.round) == (log.episode, log.round):
+                what = ("HOLD " if last.held else "") + last.invocation
+            parts.append(f"{uav} {what or '?'} r={res.rewards[uav]:+.2f}")
+        status = f" [{res.reason}]" if res.done else ""
+        self.console.print(
+            f"ep {log.episode} round {log.round + 1:2d} | " + " | ".join(parts)
+            + f" | stable {res.stable_rounds}{status} ({log.wait_s:.2f} s)",
+            soft_wrap=True,
+        )
+
+
+def print_summary(summary: dict[str, Any], console: Console | None = None) -> None:
+    console = console or Console()
+    t = Table(title=f"{summary['task']} · seed {summary['seed']} · {summary['mode']} · {summary['selector']}")
+    t.add_column("episode")
+    t.add_column("rounds")
+    t.add_column("end")
+    t.add_column("team return")
+    for uav in sorted(summary["agent_returns"]):
+        t.add_column(uav)
+    for ep in summary["episodes"]:
+        t.add_row(
+            str(ep["episode"]), str(ep["rounds"]), ep["reason"], f"{ep['team_return']:.3f}",
+            *(f"{ep['agent_returns'][u]:.3f}" for u in sorted(summary["agent_returns"])),
+        )
+    console.print(t)
+    tok = summary.get("tokens") or {}
+    console.print(
+        f"team mean return {summary['team_return']:.3f} over {len(summary['episodes'])} episode(s); "
+        f"rounds {summary['rounds']}; messages sent {summary['messages_sent']}, dropped "
+        f"{summary['messages_dropped']}; decode errors {summary['decode_errors']}; holds {summary['holds']}; "
+        f"deadline misses {summary['deadline_misses']}; wall {summary['wall_s']:.2f} s"
+    )
+    if summary.get("model"):
+        console.print(
+            f"model {summary['model']}; probe: {summary['probe']}; LLM calls {summary['llm_calls']}; "
+            f"tokens {tok.get('total', 0)} (prompt {tok.get('prompt', 0)}, completion {tok.get('completion', 0)})"
+        )
+    if summary.get("lost_uavs"):
+        lost = ", ".join(f"{u} (episode {w[0]}, round {w[1] + 1})" for u, w in summary["lost_uavs"].items())
+        console.print(f"[bold red]lost daemons[/]: {lost}; the world held them from then on")
+    if summary.get("note"):
+        console.print(f"[yellow]note[/]: {summary['note']}")

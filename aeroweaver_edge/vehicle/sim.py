@@ -1,0 +1,163 @@
+"""The simulator backend: Vehicle, Clock, Perception and RewardSource ports served by the
+kinematic world over Zenoh, in lockstep.
+
+The world sends each UAV its frozen perception (the round trigger); the UAV answers with
+one gated velocity setpoint and the list of peer messages it sent, so the world can tell
+each recipient what to wait for next round. A UAV that misses the world's deadline holds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from aeroweaver_edge.observation import VehicleState
+from aeroweaver_edge.ports import Health, RewardEvent, RoundTick
+from aeroweaver_edge.wire import (
+    Entity,
+    HeaderFactory,
+    Keys,
+    MsgRef,
+    SimCommand,
+    SimEpisode,
+    SimPerception,
+    SimReward,
+    Vec3,
+)
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.mesh import Mesh
+
+ZERO: Vec3 = (0.0, 0.0, 0.0)
+
+
+class SimLink:
+    """One UAV's link to the simulated world. Serves four ports from one subscription set."""
+
+    def __init__(self, mesh: Mesh, keys: Keys, uav: str, headers: HeaderFactory, reward_wait_s: float = 2.0) -> None:
+        self._mesh = mesh
+        self._keys = keys
+        self.uav = uav
+        self._headers = headers
+        self._reward_wait_s = reward_wait_s
+        self._ticks: asyncio.Queue[SimPerception | None] = asyncio.Queue()
+        self._rewards: list[RewardEvent] = []
+        self._reward_seen: set[tuple[int, int]] = set()
+        self._reward_cond = asyncio.Condition()
+        self._current: SimPerception | None = None
+        self._last_played: tuple[int, int] | None = None
+        self._setpoint: Vec3 = ZERO
+        self._held = True
+        self._tasks: list[asyncio.Task[None]] = []
+
+    async def start(self) -> None:
+        per = self._mesh.subscribe(self._keys.sim_perception(self.uav), SimPerception)
+        rew = self._mesh.subscribe(self._keys.sim_reward(self.uav), SimReward)
+        epi = self._mesh.subscribe(self._keys.sim_episode, SimEpisode)
+        self._tasks = [
+            asyncio.create_task(self._pump_perception(per), name=f"{self.uav}-sim-perception"),
+            asyncio.create_task(self._pump_rewards(rew), name=f"{self.uav}-sim-rewards"),
+            asyncio.create_task(self._pump_episodes(epi), name=f"{self.uav}-sim-episodes"),
+        ]
+
+    async def aclose(self) -> None:
+        for t in self._tasks:
+            t.cancel()
+        for t in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        self._tasks.clear()
+
+    async def _pump_perception(self, sub: object) -> None:
+        async for _key, msg in sub:  # type: ignore[attr-defined]
+            if msg.uav == self.uav:
+                await self._ticks.put(msg)
+
+    async def _pump_rewards(self, sub: object) -> None:
+        async for _key, msg in sub:  # type: ignore[attr-defined]
+            if msg.uav != self.uav or (msg.episode, msg.round) in self._reward_seen:
+                continue
+            async with self._reward_cond:
+                self._reward_seen.add((msg.episode, msg.round))
+                self._rewards.append(RewardEvent(msg.episode, msg.round, msg.reward, msg.done, "sim"))
+                self._reward_cond.notify_all()
+
+    async def _pump_episodes(self, sub: object) -> None:
+        async for _key, msg in sub:  # type: ignore[attr-defined]
+            if msg.phase == "shutdown":
+                await self._ticks.put(None)
+
+    async def _await_reward(self, key: tuple[int, int]) -> None:
+        """Lockstep: a round's reward reaches the agent before its next round starts."""
+        async with self._reward_cond:
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(self._reward_wait_s):
+                    await self._reward_cond.wait_for(lambda: key in self._reward_seen)
+
+    # Clock
+    async def next_round(self) -> RoundTick | None:
+        msg = await self._ticks.get()
+        if self._last_played is not None:
+            await self._await_reward(self._last_played)
+        if msg is None:
+            return None
+        self._current = msg
+        self._setpoint, self._held = ZERO, True
+        return RoundTick(msg.episode, msg.round, msg.deadline_s, tuple(msg.expected_inbox))
+
+    async def finish(self, tick: RoundTick, sent: Sequence[MsgRef]) -> None:
+        self._last_played = (tick.episode, tick.round)
+        self._mesh.put(
+            self._keys.sim_command(self.uav),
+            SimCommand(
+                h=self._headers.next(), uav=self.uav, episode=tick.episode, round=tick.round,
+                vel=self._setpoint, held=self._held, sent=list(sent),
+            ),
+            block=True,
+        )
+
+    # Perception
+    async def sense(self, tick: RoundTick) -> tuple[VehicleState, Sequence[Entity]]:
+        msg = self._require()
+        return VehicleState(msg.pos, msg.vel), msg.entities
+
+    # RewardSource
+    def drain(self) -> list[RewardEvent]:
+        out, self._rewards = self._rewards, []
+        return out
+
+    # Vehicle: the simulated airframe starts airborne at mission altitude.
+    def _require(self) -> SimPerception:
+        if self._current is None:
+            raise RuntimeError(f"{self.uav}: no perception from the simulator yet")
+        return self._current
+
+    async def state(self) -> VehicleState:
+        msg = self._require()
+        return VehicleState(msg.pos, msg.vel)
+
+    async def arm(self) -> None:
+        return None
+
+    async def takeoff(self, altitude_m: float) -> None:
+        return None
+
+    async def set_velocity(self, north: float, east: float, down: float) -> None:
+        self._setpoint, self._held = (north, east, down), False
+
+    async def goto(self, north: float, east: float, down: float) -> None:
+        raise NotImplementedError("the kinematic simulator flies velocity setpoints only")
+
+    async def hold(self) -> None:
+        self._setpoint, self._held = ZERO, True
+
+    async def land(self) -> None:
+        await self.hold()
+
+    async def return_home(self) -> None:
+        await self.hold()
+
+    async def health(self) -> Health:
+        return Health(ok=self._current is not None, detail="sim")

@@ -1,0 +1,84 @@
+"""The Commander: supplies mission context and per-UAV assignments, watches progress.
+
+It has no flight authority: it writes only under ``aw/<swarm>/cmdr/...`` and never under a
+UAV's keys. Context and assignments are also served by queryables so a daemon that starts
+late or restarts catches up.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from typing import TYPE_CHECKING
+
+from aeroweaver_edge.wire import Assignment, HeaderFactory, Keys, MissionContext, ProgressReport
+from commander.plan import MissionPlan
+from commander.progress import ProgressBoard
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.mesh import Mesh
+
+
+class Commander:
+    def __init__(self, mesh: Mesh, swarm: str, headers: HeaderFactory | None = None) -> None:
+        self.mesh = mesh
+        self.keys = Keys(swarm)
+        self.headers = headers or HeaderFactory("cmdr")
+        self.plan: MissionPlan | None = None
+        self.board = ProgressBoard(mission_id="")
+        self._context: MissionContext | None = None
+        self._assignments: dict[str, Assignment] = {}
+        self._revision = 0
+        self._tasks: list[asyncio.Task[None]] = []
+        self._queryables: set[str] = set()
+        self.report_event = asyncio.Event()
+
+    async def start(self) -> None:
+        self.mesh.declare_queryable(self.keys.context, lambda: self._context)
+        self._tasks.append(asyncio.create_task(self._pump_reports(), name="cmdr-reports"))
+        self.mesh.declare_token(self.keys.alive_cmdr)
+
+    async def aclose(self) -> None:
+        for t in self._tasks:
+            t.cancel()
+        for t in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        self._tasks.clear()
+
+    async def _pump_reports(self) -> None:
+        async for _key, rep in self.mesh.subscribe(self.keys.report("*"), ProgressReport):
+            self.board.add(rep)
+            self.report_event.set()
+
+    async def wait_ready(self, uavs: list[str], timeout_s: float) -> set[str]:
+        """Wait until every UAV acknowledged its assignment; returns the ones that did not."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout_s):
+                while not set(uavs) <= set(self.board.ready):
+                    self.report_event.clear()
+                    await self.report_event.wait()
+        return set(uavs) - set(self.board.ready)
+
+    def publish(self, plan: MissionPlan, episode: int = 0) -> None:
+        """Publish (or republish after a change) the context and every assignment."""
+        self.plan = plan
+        self._revision += 1
+        if self.board.mission_id != plan.mission_id:
+            self.board = ProgressBoard(plan.mission_id)
+        self._context = MissionContext(
+            h=self.headers.next(), mission_id=plan.mission_id, task=plan.task, text=plan.text,
+            constraints=list(plan.constraints), participants=plan.participants, episode=episode,
+        )
+        self.mesh.put(self.keys.context, self._context, block=True)
+        for uav, a in sorted(plan.assignments.items()):
+            key = self.keys.assign(uav)
+            msg = Assignment(
+                h=self.headers.next(), mission_id=plan.mission_id, uav=uav, role=a.role,
+                local_goal=a.local_goal, skills=list(a.skills), revision=self._revision,
+            )
+            self._assignments[uav] = msg
+            if key not in self._queryables:
+                self._queryables.add(key)
+                self.mesh.declare_queryable(key, lambda uav=uav: self._assignments.get(uav))
+            self.mesh.put(key, msg, block=True)

@@ -1,0 +1,60 @@
+"""A mission plan: what the Commander publishes. Built from a template for a known task
+(here) or from a parsed mission (mission parsing, roles and activation)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class UavAssignment:
+    role: str
+    local_goal: str
+    skills: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class MissionPlan:
+    mission_id: str
+    task: str
+    text: str
+    assignments: dict[str, UavAssignment]
+    constraints: tuple[str, ...] = ()
+    setup_tokens: int = 0  # LLM tokens spent once on parsing, roles and activation
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def participants(self) -> list[str]:
+        return sorted(self.assignments)
+
+
+COVERAGE_SKILLS = ("cover_landmark", "explore_local", "return_in_bounds", "hold_position")
+
+_TEMPLATES: dict[str, tuple[str, str, str, tuple[str, ...]]] = {
+    # task: (mission text, role, local goal, active skills)
+    "coverage": (
+        "Cover every landmark with one drone each and hold there; avoid collisions.",
+        "searcher",
+        "Reach a landmark no other drone is covering and stay within 3 m of it.",
+        COVERAGE_SKILLS,
+    ),
+}
+
+
+def known_tasks() -> list[str]:
+    return sorted(_TEMPLATES)
+
+
+def template_plan(task: str, uavs: Sequence[str], mission_id: str, text: str | None = None) -> MissionPlan:
+    """The fixed plan for a known task: every UAV gets the task's role and skill subset."""
+    if task not in _TEMPLATES:
+        raise ValueError(f"no template for task {task!r}; known: {', '.join(known_tasks())}")
+    default_text, role, goal, skills = _TEMPLATES[task]
+    return MissionPlan(
+        mission_id=mission_id,
+        task=task,
+        text=text or default_text,
+        assignments={u: UavAssignment(role, goal, skills) for u in uavs},
+        constraints=("stay inside the 140 m x 140 m arena", "keep at least 2 m from other drones"),
+    )

@@ -1,0 +1,47 @@
+"""Aggregates progress reports: the Commander's (read-only) view of the mission."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from aeroweaver_edge.wire import ProgressReport
+
+
+@dataclass
+class UavProgress:
+    uav: str
+    role: str = ""
+    last: ProgressReport | None = None
+    reports: int = 0
+    holds: int = 0
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    messages_sent: int = 0
+    messages_dropped: int = 0
+    llm_calls: int = 0
+
+
+@dataclass
+class ProgressBoard:
+    mission_id: str
+    uavs: dict[str, UavProgress] = field(default_factory=dict)
+    foreign: int = 0  # reports for another mission, or whose sender is not the reporting UAV
+    ready: dict[str, str] = field(default_factory=dict)  # uav -> role it acknowledged
+
+    def add(self, rep: ProgressReport) -> None:
+        if rep.mission_id != self.mission_id or rep.h.sender != rep.uav:
+            self.foreign += 1
+            return
+        if rep.phase == "ready":
+            self.ready[rep.uav] = rep.role
+            return
+        p = self.uavs.setdefault(rep.uav, UavProgress(rep.uav))
+        p.role = rep.role
+        p.last = rep
+        p.reports += 1
+        p.holds += rep.held
+        p.prompt_tokens += rep.prompt_tokens
+        p.completion_tokens += rep.completion_tokens
+        p.messages_sent += rep.messages_sent
+        p.messages_dropped += rep.messages_dropped
+        p.llm_calls += rep.prompt_tokens > 0
