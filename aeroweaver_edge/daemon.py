@@ -92,6 +92,7 @@ class UavDaemon:
         self.link = PeerLink(mesh, self.keys, cfg.uav, headers, cfg.mesh.comm_radius_m)
         self._on_round = on_round
         self._last_reward: float | None = None
+        self._warmed: tuple[str, str] | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self.rc = RoundContext(
             uav=cfg.uav, uav_index=uav_index, registry=registry, selector=selector,
@@ -161,6 +162,7 @@ class UavDaemon:
                 if tick is None:
                     break
                 view = self.mission.view()
+                await self._warm(view)
                 out = await run_round(self.rc, tick, view)
                 await self.ports.clock.finish(tick, out.sent)
                 self._account(out)
@@ -176,6 +178,13 @@ class UavDaemon:
                     await t
             await self.link.aclose()
         return self.stats
+
+    async def _warm(self, view: MissionView | None) -> None:
+        """Build the memory index for a new role now, not inside a round's deadline."""
+        if self.memory is None or view is None or (view.task, view.role) == self._warmed:
+            return
+        self._warmed = (view.task, view.role)
+        await self.memory.warm(view.task, view.role)
 
     def _account(self, out: RoundOutcome) -> None:
         s = self.stats

@@ -26,12 +26,14 @@ def describe(obs: Observation) -> str:
     pos = obs.own.pos
     speed = math.hypot(obs.own.vel[0], obs.own.vel[1])
     lines = [
-        f"round {obs.round}; position north {_m(pos[0])} m east {_m(pos[1])} m; speed {round(speed)} m/s",
+        f"round {obs.round}; position north {_m(pos[0])} m east {_m(pos[1])} m; "
+        f"speed {round(speed)} m/s",
     ]
     for e in sorted(obs.entities, key=lambda e: (e.kind, e.id)):
         d = horizontal_distance(pos, e.pos)
         role = f" ({e.role})" if e.role else ""
-        lines.append(f"{e.kind} {e.id}{role}: {_m(d)} m {_bearing(pos, e.pos)}")
+        # The id comes right before the distance so similar states share "<id>~<metres>".
+        lines.append(f"{e.kind}{role} {e.id}: {_m(d)} m {_bearing(pos, e.pos)}")
     if not obs.entities:
         lines.append("nothing within sensing range")
     return "\n".join(lines)

@@ -1,0 +1,925 @@
+"""Role-indexed experience memory (DESIGN §4 step 8 and §5).
+
+Storage
+    One SQLite file per daemon in WAL mode (``path=None``: in-memory). ``records`` holds
+    one row per decision, unique on (uav, episode, round); ``rewards`` holds every reward
+    as delivered, unique on the same key, which makes reward delivery idempotent and lets
+    a record that is appended *after* its reward (or after a later reward) still get the
+    right return. ``schema_version`` and ``meta`` (tokeniser version, gamma) let a later
+    release migrate or rebuild. ``PRAGMA integrity_check`` runs at open; a corrupt or
+    foreign file is renamed aside (``<name>.corrupt-<utc>``) and a fresh one is created:
+    memory is advisory, never safety-critical. Write errors (disk full, read-only, I/O)
+    are logged at a limited rate, counted and dropped; they never reach the round loop.
+
+Returns
+    G_t = sum over delivered rewards r_u with u >= t of gamma^(u-t) * r_u, per trajectory
+    (uav, episode). A record has no return (``None``) until a reward at or after its round
+    arrives. Only records this memory appended itself (``origin == ""``) are credited by
+    ``add_reward``; a peer's records carry the peer's own return and are replaced by a
+    newer version through ``ingest``.
+
+Retrieval (the exact algorithm of DESIGN §5)
+    Exact (task, role) match; eligible records are those with a return -- by default any
+    record with at least one reward, not only finalised ones. That is the paper's rule
+    ("each online selection uses only reward evidence already observed before that
+    decision"; returns "are extended and finalised when the trajectory ends"): with 24-round
+    episodes, waiting for finalisation would leave the first episode with no correction at
+    all. The price is that in-flight returns are truncated (biased towards the rewards seen
+    so far); ``finalised_only=True`` gives the conservative variant. Among eligible records
+    with a positive Jaccard overlap of token sets (see ``state_tokens``), the top
+    ``neighbourhood`` by overlap are kept, ties broken by recency (the order in which this
+    memory first stored the record, newer first). Baseline = mean return of the
+    neighbourhood; A(skill) = mean return of the neighbourhood's records of that skill
+    minus the baseline; an unseen skill gets 0. Everything is unweighted. The key is the
+    skill name, so every parameterisation shares its skill's advantage.
+
+Speed
+    SQLite is the durable store; retrieval runs on an in-memory inverted index per
+    (task, role), loaded lazily from the table on first use and kept in sync on every
+    write. Posting lists and per-record columns are ``array`` buffers, so a query is one
+    ``numpy.bincount`` over the postings of the query's tokens -- O(postings) with no
+    Python loop over records -- then an O(n) threshold selection for the top K.
+
+Not thread-safe: one owner thread (see ``AsyncExperienceMemory`` for the asyncio daemon).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import sqlite3
+import time
+from array import array
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, Final, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+
+from aeroweaver_edge.agent.state_tokens import TOKENIZER_VERSION, tokenise
+from aeroweaver_edge.config import AgentConfig
+from aeroweaver_edge.wire import MAX_TEXT, ExperienceRecord, Header
+
+log = logging.getLogger(__name__)
+
+SCHEMA_VERSION: Final = 1
+LOCAL: Final = ""  # ``origin`` of records appended by this memory's own daemon
+
+Key = tuple[str, int, int]  # (uav, episode, round)
+T = TypeVar("T")
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL) WITHOUT ROWID;
+CREATE TABLE IF NOT EXISTS records (
+    seq           INTEGER PRIMARY KEY AUTOINCREMENT,  -- created order: the recency tie-break
+    task          TEXT    NOT NULL,
+    role          TEXT    NOT NULL,
+    uav           TEXT    NOT NULL,
+    episode       INTEGER NOT NULL,
+    round         INTEGER NOT NULL,
+    state_text    TEXT    NOT NULL,
+    tokens        TEXT    NOT NULL,                   -- space-joined token set
+    skill         TEXT    NOT NULL,
+    invocation    TEXT    NOT NULL,
+    reward        REAL,                               -- r_t as delivered, unchanged
+    ret           REAL,                               -- G_t so far; NULL until rewarded
+    final         INTEGER NOT NULL DEFAULT 0,
+    origin        TEXT    NOT NULL DEFAULT '',        -- '' = appended here, else peer sender
+    reward_source TEXT    NOT NULL DEFAULT '',
+    src_epoch     INTEGER NOT NULL DEFAULT 0,         -- version of a peer's record
+    src_seq       INTEGER NOT NULL DEFAULT 0,
+    created_at    REAL    NOT NULL,
+    UNIQUE (uav, episode, round)
+);
+CREATE INDEX IF NOT EXISTS records_by_role ON records (task, role, seq);
+CREATE TABLE IF NOT EXISTS rewards (
+    uav     TEXT    NOT NULL,
+    episode INTEGER NOT NULL,
+    round   INTEGER NOT NULL,
+    reward  REAL    NOT NULL,
+    source  TEXT    NOT NULL,
+    PRIMARY KEY (uav, episode, round)
+) WITHOUT ROWID;
+"""
+
+_COLUMNS = (
+    "seq, task, role, uav, episode, round, state_text, skill, invocation, reward, ret, final, "
+    "origin, reward_source"
+)
+
+
+@dataclass(frozen=True, slots=True)
+class StoredRecord:
+    """One stored decision with its provenance."""
+
+    seq: int
+    task: str
+    role: str
+    uav: str
+    episode: int
+    round: int
+    state_text: str
+    skill: str
+    invocation: str
+    reward: float | None
+    ret: float | None
+    final: bool
+    origin: str  # "" = appended by this daemon, else the peer that published it
+    reward_source: str
+
+    def to_wire(self, h: Header) -> ExperienceRecord:
+        """The payload a daemon publishes on ``.../experience`` (it supplies the header)."""
+        return ExperienceRecord(
+            h=h,
+            task=self.task,
+            role=self.role,
+            uav=self.uav,
+            episode=self.episode,
+            round=self.round,
+            state_text=self.state_text,
+            skill=self.skill,
+            invocation=self.invocation,
+            reward=self.reward,
+            ret=self.ret,
+            final=self.final,
+            reward_source=self.reward_source,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Neighbour:
+    """One member of a retrieved neighbourhood (for inspection, tests and reports)."""
+
+    key: Key
+    skill: str
+    ret: float
+    similarity: float
+    seq: int
+
+
+def skill_of(name: str) -> str:
+    """``cover_landmark(target=L2)`` -> ``cover_landmark``: a parameterisation shares its
+    skill's advantage, so callers may pass invocations as well as skill names."""
+    return name.split("(", 1)[0].strip()
+
+
+class _Group:
+    """In-memory inverted index of one (task, role): position i = i-th record by seq."""
+
+    __slots__ = (
+        "final",
+        "keys",
+        "pos",
+        "postings",
+        "ret",
+        "seq",
+        "size",
+        "skill",
+        "skill_ids",
+        "skills",
+    )
+
+    def __init__(self) -> None:
+        self.seq = array("q")
+        self.size = array("i")  # token-set size
+        self.ret = array("d")  # NaN = no return yet
+        self.final = array("b")
+        self.skill = array("i")
+        self.skills: list[str] = []
+        self.skill_ids: dict[str, int] = {}
+        self.postings: dict[str, array[int]] = {}
+        self.pos: dict[Key, int] = {}
+        self.keys: list[Key] = []
+
+    def __len__(self) -> int:
+        return len(self.seq)
+
+    def add(
+        self, key: Key, seq: int, tokens: Iterable[str], skill: str, ret: float | None, final: bool
+    ) -> None:
+        i = len(self.seq)
+        n_tokens = 0
+        postings = self.postings
+        for tok in tokens:
+            plist = postings.get(tok)
+            if plist is None:
+                plist = postings[tok] = array("i")
+            plist.append(i)
+            n_tokens += 1
+        sid = self.skill_ids.get(skill)
+        if sid is None:
+            sid = self.skill_ids[skill] = len(self.skills)
+            self.skills.append(skill)
+        self.seq.append(seq)
+        self.size.append(n_tokens)
+        self.ret.append(math.nan if ret is None else ret)
+        self.final.append(1 if final else 0)
+        self.skill.append(sid)
+        self.pos[key] = i
+        self.keys.append(key)
+
+
+class ExperienceMemory:
+    """Durable, role-indexed experience with fast Jaccard retrieval (module docstring)."""
+
+    def __init__(
+        self,
+        path: str | Path | None = None,
+        *,
+        gamma: float = 0.95,
+        neighbourhood: int = 32,
+        finalised_only: bool = False,
+        durable: bool = False,
+    ) -> None:
+        """``durable=True`` sets ``synchronous=FULL`` (commits survive power loss); the
+        default ``NORMAL`` is crash-consistent and may lose the last commits on power loss,
+        which advisory memory can afford."""
+        if not 0.0 <= gamma <= 1.0:
+            raise ValueError(f"gamma {gamma} must be within [0, 1]")
+        if neighbourhood < 1:
+            raise ValueError(f"neighbourhood {neighbourhood} must be at least 1")
+        self.path = Path(path) if path is not None else None
+        self.gamma = gamma
+        self.neighbourhood = neighbourhood
+        self.finalised_only = finalised_only
+        self.quarantined: Path | None = None
+        self.degraded: str | None = None  # why we fell back to an in-memory database
+        self.write_errors = 0
+        self._last_error_log = -math.inf
+        self._groups: dict[tuple[str, str], _Group] = {}
+        self._durable = durable
+        self._db = self._open()
+
+    @classmethod
+    def from_config(cls, cfg: AgentConfig) -> ExperienceMemory:
+        return cls(cfg.memory_path, gamma=cfg.gamma, neighbourhood=cfg.neighbourhood)
+
+    # ------------------------------------------------------------------ opening
+
+    def _open(self) -> sqlite3.Connection:
+        """A ready connection to ``path``; on any environmental failure (unwritable
+        directory, read-only file system, ...) an in-memory one, so the daemon flies on."""
+        if self.path is not None:
+            conn: sqlite3.Connection | None = None
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                problem = self._check(self.path)
+                if problem is not None:
+                    self._quarantine(problem)
+                conn = sqlite3.connect(self.path, isolation_level=None, timeout=2.0)
+                self._prepare(conn)
+                return conn
+            except (OSError, sqlite3.Error) as exc:
+                if conn is not None:
+                    conn.close()
+                self.degraded = f"{type(exc).__name__}: {exc}"
+                log.error(
+                    "experience memory %s unusable (%s); using an in-memory database, "
+                    "experience will not survive a restart",
+                    self.path,
+                    self.degraded,
+                )
+        conn = sqlite3.connect(":memory:", isolation_level=None)
+        self._prepare(conn)
+        return conn
+
+    @staticmethod
+    def _check(path: Path) -> str | None:
+        """Why ``path`` cannot be used as our memory, or ``None`` if it can."""
+        if not path.exists():
+            return None
+        conn = sqlite3.connect(path, isolation_level=None, timeout=2.0)
+        try:
+            rows = conn.execute("PRAGMA integrity_check").fetchall()
+            if rows != [("ok",)]:
+                return "integrity_check: " + "; ".join(str(r[0]) for r in rows[:5])
+            tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master")}
+            if "schema_version" not in tables:
+                return None if not tables else f"not an experience memory (tables {sorted(tables)})"
+            row = conn.execute("SELECT max(version) FROM schema_version").fetchone()
+            if row is None or row[0] is None or row[0] > SCHEMA_VERSION:
+                return f"schema version {row[0] if row else None} unknown to this release"
+            return None
+        except sqlite3.DatabaseError as exc:
+            return f"{type(exc).__name__}: {exc}"
+        finally:
+            conn.close()
+
+    def _quarantine(self, problem: str) -> None:
+        assert self.path is not None
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S%fZ")
+        aside = self.path.with_name(f"{self.path.name}.corrupt-{stamp}")
+        self.path.rename(aside)
+        for suffix in ("-wal", "-shm"):
+            side = self.path.with_name(self.path.name + suffix)
+            if side.exists():
+                side.rename(aside.with_name(aside.name + suffix))
+        self.quarantined = aside
+        log.error(
+            "experience memory %s is unusable (%s): quarantined as %s, starting a fresh one "
+            "(memory is advisory; flight is unaffected)",
+            self.path,
+            problem,
+            aside,
+        )
+
+    def _prepare(self, conn: sqlite3.Connection) -> None:
+        """Pragmas, schema, and the rebuilds a changed tokeniser or gamma requires."""
+        mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+        if mode not in ("wal", "memory"):
+            log.warning("experience memory: journal mode is %s, not WAL", mode)
+        conn.execute(f"PRAGMA synchronous={'FULL' if self._durable else 'NORMAL'}")
+        conn.execute("PRAGMA busy_timeout=2000")
+        conn.executescript(_SCHEMA)  # commits on its own, hence outside a transaction
+        self._db = conn
+        with self._tx():
+            if conn.execute("SELECT count(*) FROM schema_version").fetchone()[0] == 0:
+                conn.execute("INSERT INTO schema_version VALUES (?)", (SCHEMA_VERSION,))
+            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+            if meta.get("tokenizer") != str(TOKENIZER_VERSION):
+                self._retokenise()
+            if "gamma" in meta and float(meta["gamma"]) != self.gamma:
+                log.info(
+                    "experience memory: gamma %s -> %s, recomputing returns",
+                    meta["gamma"],
+                    self.gamma,
+                )
+                self._recompute_returns()
+            conn.executemany(
+                "INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                [("tokenizer", str(TOKENIZER_VERSION)), ("gamma", repr(self.gamma))],
+            )
+
+    def _retokenise(self) -> None:
+        rows = self._db.execute("SELECT seq, state_text FROM records").fetchall()
+        self._db.executemany(
+            "UPDATE records SET tokens = ? WHERE seq = ?",
+            [(" ".join(sorted(tokenise(text))), seq) for seq, text in rows],
+        )
+
+    def _recompute_returns(self) -> None:
+        rewards: dict[tuple[str, int], list[tuple[int, float]]] = {}
+        for uav, episode, rnd, reward in self._db.execute(
+            "SELECT uav, episode, round, reward FROM rewards"
+        ):
+            rewards.setdefault((uav, episode), []).append((rnd, reward))
+        rows = self._db.execute(
+            "SELECT seq, uav, episode, round FROM records WHERE origin = ''"
+        ).fetchall()
+        self._db.executemany(
+            "UPDATE records SET ret = ? WHERE seq = ?",
+            [(self._return_at(rewards.get((u, e), []), r), s) for s, u, e, r in rows],
+        )
+
+    def _return_at(self, rewards: Iterable[tuple[int, float]], rnd: int) -> float | None:
+        total: float | None = None
+        for u, r in sorted(rewards):
+            if u >= rnd:
+                total = (total or 0.0) + self.gamma ** (u - rnd) * r
+        return total
+
+    # ------------------------------------------------------------------ plumbing
+
+    @contextlib.contextmanager
+    def _tx(self) -> Iterator[None]:
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException:
+            if self._db.in_transaction:  # SQLite may already have rolled back (disk full)
+                with contextlib.suppress(sqlite3.Error):
+                    self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
+
+    def _guard(self, what: str, default: T, fn: Callable[[], T]) -> T:
+        """Run a database operation; an environmental failure is logged, counted and
+        dropped (memory is advisory), a programming error still raises."""
+        try:
+            return fn()
+        except (sqlite3.ProgrammingError, sqlite3.IntegrityError, sqlite3.InterfaceError):
+            raise
+        except sqlite3.Error as exc:
+            self.write_errors += 1
+            now = time.monotonic()
+            if now - self._last_error_log >= 5.0:
+                self._last_error_log = now
+                log.error(
+                    "experience memory: %s failed (%s); dropped (%d errors so far)",
+                    what,
+                    exc,
+                    self.write_errors,
+                )
+            return default
+
+    def _group(self, task: str, role: str) -> _Group:
+        group = self._groups.get((task, role))
+        if group is None:
+            group = _Group()
+            for seq, uav, episode, rnd, tokens, skill, ret, final in self._db.execute(
+                "SELECT seq, uav, episode, round, tokens, skill, ret, final FROM records "
+                "WHERE task = ? AND role = ? ORDER BY seq",
+                (task, role),
+            ):
+                group.add((uav, episode, rnd), seq, tokens.split(), skill, ret, bool(final))
+            self._groups[(task, role)] = group
+        return group
+
+    # ------------------------------------------------------------------ writing
+
+    def append(
+        self,
+        task: str,
+        role: str,
+        uav: str,
+        episode: int,
+        round: int,
+        state_text: str,
+        skill: str,
+        invocation: str,
+    ) -> bool:
+        """Store one decision; ``False`` if (uav, episode, round) was already stored.
+
+        Rewards already delivered for this or later rounds of the trajectory are folded
+        into its return at once, so delivery order does not matter."""
+        tokens = tokenise(state_text)
+        skill = skill_of(skill)
+
+        def run() -> tuple[int, float | None, float | None] | None:
+            with self._tx():
+                rewards = self._db.execute(
+                    "SELECT round, reward, source FROM rewards "
+                    "WHERE uav = ? AND episode = ? AND round >= ?",
+                    (uav, episode, round),
+                ).fetchall()
+                own = next(((r, s) for u, r, s in rewards if u == round), (None, ""))
+                ret = self._return_at(((u, r) for u, r, _ in rewards), round)
+                cur = self._db.execute(
+                    "INSERT OR IGNORE INTO records (task, role, uav, episode, round, state_text, "
+                    "tokens, skill, invocation, reward, ret, reward_source, created_at) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        task,
+                        role,
+                        uav,
+                        episode,
+                        round,
+                        state_text,
+                        " ".join(sorted(tokens)),
+                        skill,
+                        invocation,
+                        own[0],
+                        ret,
+                        own[1],
+                        time.time(),
+                    ),
+                )
+                if cur.rowcount == 0:
+                    return None
+                assert cur.lastrowid is not None
+                return cur.lastrowid, own[0], ret
+
+        done = self._guard("append", None, run)
+        if done is None:
+            return False
+        group = self._groups.get((task, role))
+        if group is not None:
+            group.add((uav, episode, round), done[0], tokens, skill, done[2], False)
+        return True
+
+    def add_reward(self, uav: str, episode: int, round: int, reward: float, source: str) -> bool:
+        """Store r_round unchanged and credit gamma^(round-t) * r to every G_t, t <= round,
+        of this trajectory. Idempotent: the same reward delivered again changes nothing; a
+        different value for the same round replaces the old one (returns are adjusted by
+        the difference). Returns whether anything changed."""
+        if not math.isfinite(reward):
+            log.warning(
+                "experience memory: non-finite reward %r for %s/%s/%s ignored",
+                reward,
+                uav,
+                episode,
+                round,
+            )
+            return False
+
+        def run() -> list[tuple[str, str, Key, float]] | None:
+            with self._tx():
+                old = self._db.execute(
+                    "SELECT reward FROM rewards WHERE uav = ? AND episode = ? AND round = ?",
+                    (uav, episode, round),
+                ).fetchone()
+                if old is not None and old[0] == reward:
+                    return None
+                delta = reward - (old[0] if old is not None else 0.0)
+                self._db.execute(
+                    "INSERT OR REPLACE INTO rewards VALUES (?, ?, ?, ?, ?)",
+                    (uav, episode, round, reward, source),
+                )
+                self._db.execute(
+                    "UPDATE records SET reward = ?, reward_source = ? "
+                    "WHERE uav = ? AND episode = ? AND round = ? AND origin = ''",
+                    (reward, source, uav, episode, round),
+                )
+                rows = self._db.execute(
+                    "SELECT seq, task, role, round, ret FROM records "
+                    "WHERE uav = ? AND episode = ? AND round <= ? AND origin = ''",
+                    (uav, episode, round),
+                ).fetchall()
+                g = self.gamma
+                updates = [
+                    (task, role, (uav, episode, t), (ret or 0.0) + g ** (round - t) * delta)
+                    for _, task, role, t, ret in rows
+                ]
+                self._db.executemany(
+                    "UPDATE records SET ret = ? WHERE seq = ?",
+                    [(u[3], row[0]) for u, row in zip(updates, rows, strict=True)],
+                )
+                return updates
+
+        updates = self._guard("add_reward", None, run)
+        if updates is None:
+            return False
+        for task, role, key, ret in updates:
+            group = self._groups.get((task, role))
+            if group is not None:
+                group.ret[group.pos[key]] = ret
+        return True
+
+    def finalise(self, uav: str, episode: int) -> int:
+        """Mark the trajectory ended: its returns are complete. Returns records marked."""
+
+        def run() -> list[tuple[str, str, int]]:
+            with self._tx():
+                rows = self._db.execute(
+                    "SELECT task, role, round FROM records "
+                    "WHERE uav = ? AND episode = ? AND final = 0 AND origin = ''",
+                    (uav, episode),
+                ).fetchall()
+                self._db.execute(
+                    "UPDATE records SET final = 1 WHERE uav = ? AND episode = ? AND origin = ''",
+                    (uav, episode),
+                )
+                return rows
+
+        nothing: list[tuple[str, str, int]] = []
+        rows = self._guard("finalise", nothing, run)
+        for task, role, rnd in rows:
+            group = self._groups.get((task, role))
+            if group is not None:
+                group.final[group.pos[(uav, episode, rnd)]] = 1
+        return len(rows)
+
+    def ingest(self, record: ExperienceRecord) -> bool:
+        """Merge a peer's record (shared swarm memory). New keys are inserted; a stored
+        peer record is replaced by a newer version (finalised beats in flight, then the
+        publisher's (epoch, seq)), never downgraded from final. Records this daemon
+        appended itself are authoritative and never overwritten, which also drops our
+        own echo. Malformed records (non-finite numbers, oversize text) are refused.
+        Returns whether anything changed."""
+        problem = _invalid(record)
+        if problem is not None:
+            log.debug("experience memory: refused record from %s: %s", record.h.sender, problem)
+            return False
+        key: Key = (record.uav, record.episode, record.round)
+        skill = skill_of(record.skill)
+        tokens = tokenise(record.state_text)
+        version = (record.final, record.h.epoch, record.h.seq)
+
+        def run() -> tuple[int, str, str] | None:
+            """(seq, task, role) of the inserted or updated row, or None if unchanged."""
+            with self._tx():
+                row = self._db.execute(
+                    "SELECT seq, origin, final, src_epoch, src_seq, reward, ret, task, role "
+                    "FROM records WHERE uav = ? AND episode = ? AND round = ?",
+                    key,
+                ).fetchone()
+                if row is None:
+                    cur = self._db.execute(
+                        "INSERT INTO records (task, role, uav, episode, round, state_text, tokens, "
+                        "skill, invocation, reward, ret, final, origin, reward_source, src_epoch, "
+                        "src_seq, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, "
+                        "?, ?)",
+                        (
+                            record.task,
+                            record.role,
+                            *key,
+                            record.state_text,
+                            " ".join(sorted(tokens)),
+                            skill,
+                            record.invocation,
+                            record.reward,
+                            record.ret,
+                            int(record.final),
+                            record.h.sender or "?",
+                            record.reward_source,
+                            record.h.epoch,
+                            record.h.seq,
+                            time.time(),
+                        ),
+                    )
+                    assert cur.lastrowid is not None
+                    return cur.lastrowid, record.task, record.role
+                seq, origin, final, epoch, src_seq, reward, ret, task, role = row
+                if origin == LOCAL or version <= (bool(final), epoch, src_seq):
+                    return None
+                self._db.execute(
+                    "UPDATE records SET reward = ?, ret = ?, final = ?, reward_source = ?, "
+                    "src_epoch = ?, src_seq = ?, origin = ? WHERE seq = ?",
+                    (
+                        record.reward,
+                        record.ret,
+                        int(record.final),
+                        record.reward_source,
+                        record.h.epoch,
+                        record.h.seq,
+                        record.h.sender or "?",
+                        seq,
+                    ),
+                )
+                if (reward, ret, bool(final)) == (record.reward, record.ret, record.final):
+                    return None  # a newer copy of the same content
+                return seq, task, role
+
+        done = self._guard("ingest", None, run)
+        if done is None:
+            return False
+        group = self._groups.get((done[1], done[2]))
+        if group is not None:
+            i = group.pos.get(key)
+            if i is None:
+                group.add(key, done[0], tokens, skill, record.ret, record.final)
+            else:
+                group.ret[i] = math.nan if record.ret is None else record.ret
+                group.final[i] = 1 if record.final else 0
+        return True
+
+    # ------------------------------------------------------------------ reading
+
+    def warm(self, task: str, role: str) -> int:
+        """Build the retrieval index of (task, role) now rather than on the first query
+        (about 1.5 s at 10^5 records), e.g. right after the role is assigned, so the first
+        decision after a restart is not the slow one. Returns the records indexed."""
+        group = self._guard("warm", None, lambda: self._group(task, role))
+        return 0 if group is None else len(group)
+
+    def get(self, uav: str, episode: int, round: int) -> StoredRecord | None:
+        row = self._db.execute(
+            f"SELECT {_COLUMNS} FROM records WHERE uav = ? AND episode = ? AND round = ?",
+            (uav, episode, round),
+        ).fetchone()
+        return _stored(row) if row is not None else None
+
+    def export(self, uav: str, episode: int, *, final_only: bool = True) -> list[StoredRecord]:
+        """This memory's own records of one trajectory, by round, for publishing."""
+        sql = (
+            f"SELECT {_COLUMNS} FROM records WHERE uav = ? AND episode = ? AND origin = ''"
+            + (" AND final = 1" if final_only else "")
+            + " ORDER BY round"
+        )
+        return [_stored(r) for r in self._db.execute(sql, (uav, episode))]
+
+    def export_final(self, uav: str, episode: int) -> list[StoredRecord]:
+        return self.export(uav, episode, final_only=True)
+
+    def records(self, task: str, role: str) -> list[StoredRecord]:
+        """Every record of one (task, role) in stored order (inspection and tests)."""
+        sql = f"SELECT {_COLUMNS} FROM records WHERE task = ? AND role = ? ORDER BY seq"
+        return [_stored(r) for r in self._db.execute(sql, (task, role))]
+
+    def __len__(self) -> int:
+        return int(self._db.execute("SELECT count(*) FROM records").fetchone()[0])
+
+    def _select(
+        self, group: _Group, tokens: frozenset[str]
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """Positions of the neighbourhood (best first) and their Jaccard similarities."""
+        n = len(group)
+        empty = (np.empty(0, np.int64), np.empty(0, np.float64))
+        # Tokens every record holds (task, role, fixed field names) add 1 to every overlap:
+        # count them instead of concatenating n-long posting lists.
+        everywhere = 0
+        lists = []
+        for tok in tokens:
+            plist = group.postings.get(tok)
+            if plist is None:
+                continue
+            if len(plist) == n:
+                everywhere += 1
+            else:
+                lists.append(np.frombuffer(plist, dtype=np.int32))
+        if n == 0 or (not lists and not everywhere):
+            return empty
+        inter = np.full(n, everywhere, dtype=np.int64)
+        if lists:
+            inter += np.bincount(np.concatenate(lists), minlength=n)
+        ret = np.frombuffer(group.ret, dtype=np.float64)
+        eligible = (inter > 0) & ~np.isnan(ret)
+        if self.finalised_only:
+            eligible &= np.frombuffer(group.final, dtype=np.int8) != 0
+        cand = np.flatnonzero(eligible)  # ascending position == ascending recency
+        if cand.size == 0:
+            return empty
+        ci = inter[cand]
+        sim = ci / (np.frombuffer(group.size, dtype=np.int32)[cand] + len(tokens) - ci)
+        k = self.neighbourhood
+        if cand.size > k:
+            kth = np.partition(sim, cand.size - k)[cand.size - k]  # k-th largest similarity
+            above = np.flatnonzero(sim > kth)
+            ties = np.flatnonzero(sim == kth)[-(k - above.size) :]  # newest of the tied
+            keep = np.concatenate([above, ties])
+        else:
+            keep = np.arange(cand.size)
+        # best first: similarity desc, then recency desc
+        order = np.lexsort((-cand[keep], -sim[keep]))
+        keep = keep[order]
+        return cand[keep].astype(np.int64), sim[keep].astype(np.float64)
+
+    def neighbourhood_of(self, task: str, role: str, state_text: str) -> list[Neighbour]:
+        """The retrieved neighbourhood, best first (what ``advantages`` averages over)."""
+        group = self._group(task, role)
+        pos, sim = self._select(group, tokenise(state_text))
+        return [
+            Neighbour(group.keys[i], group.skills[group.skill[i]], group.ret[i], s, group.seq[i])
+            for i, s in zip(pos.tolist(), sim.tolist(), strict=True)
+        ]
+
+    def advantages(
+        self, task: str, role: str, state_text: str, skills: Iterable[str]
+    ) -> dict[str, float]:
+        """A(s, skill) = mean return of the neighbourhood's records of that skill minus
+        the neighbourhood's mean return; 0 for a skill the neighbourhood has not seen.
+        Keys are the strings given (skill names or invocations; both map to the skill)."""
+        names = list(skills)
+        group = self._guard("retrieval", None, lambda: self._group(task, role))
+        if group is None:
+            return dict.fromkeys(names, 0.0)
+        pos, _ = self._select(group, tokenise(state_text))
+        if pos.size == 0:
+            return dict.fromkeys(names, 0.0)
+        rets = np.frombuffer(group.ret, dtype=np.float64)[pos]
+        sids = np.frombuffer(group.skill, dtype=np.int32)[pos]
+        baseline = float(rets.mean())
+        sums = np.bincount(sids, weights=rets, minlength=len(group.skills))
+        counts = np.bincount(sids, minlength=len(group.skills))
+        out: dict[str, float] = {}
+        for name in names:
+            sid = group.skill_ids.get(skill_of(name))
+            if sid is None or counts[sid] == 0:
+                out[name] = 0.0
+            else:
+                out[name] = float(sums[sid] / counts[sid]) - baseline
+        return out
+
+    def close(self) -> None:
+        self._groups.clear()
+        with contextlib.suppress(sqlite3.Error):
+            self._db.close()
+
+    def __enter__(self) -> ExperienceMemory:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _stored(row: tuple[Any, ...]) -> StoredRecord:
+    seq, task, role, uav, episode, rnd, text, skill, inv, reward, ret, final, origin, src = row
+    return StoredRecord(
+        seq, task, role, uav, episode, rnd, text, skill, inv, reward, ret, bool(final), origin, src
+    )
+
+
+def _invalid(record: ExperienceRecord) -> str | None:
+    """Why a peer's record must not enter memory (memory poisoning is a threat model item)."""
+    for name in ("reward", "ret"):
+        value = getattr(record, name)
+        if value is not None and not math.isfinite(value):
+            return f"non-finite {name}"
+    if len(record.state_text) > MAX_TEXT or len(record.invocation) > MAX_TEXT:
+        return "oversize text"
+    if not (record.task and record.role and record.uav and record.skill):
+        return "empty task, role, uav or skill"
+    return None
+
+
+class AsyncExperienceMemory:
+    """``ExperienceMemory`` for the asyncio daemon: one worker thread owns the SQLite
+    connection (created in that thread) and runs every call in FIFO order, so the event
+    loop never blocks on disk and writes keep their order. Create with ``open``."""
+
+    def __init__(self, executor: ThreadPoolExecutor, memory: ExperienceMemory) -> None:
+        self._executor = executor
+        self._mem = memory
+        self._closed = False
+
+    @classmethod
+    async def open(
+        cls,
+        path: str | Path | None = None,
+        *,
+        gamma: float = 0.95,
+        neighbourhood: int = 32,
+        finalised_only: bool = False,
+        durable: bool = False,
+    ) -> AsyncExperienceMemory:
+        executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="aw-memory")
+        loop = asyncio.get_running_loop()
+        try:
+            memory = await loop.run_in_executor(
+                executor,
+                lambda: ExperienceMemory(
+                    path,
+                    gamma=gamma,
+                    neighbourhood=neighbourhood,
+                    finalised_only=finalised_only,
+                    durable=durable,
+                ),
+            )
+        except BaseException:
+            executor.shutdown(wait=False)
+            raise
+        return cls(executor, memory)
+
+    @classmethod
+    async def from_config(cls, cfg: AgentConfig) -> AsyncExperienceMemory:
+        return await cls.open(cfg.memory_path, gamma=cfg.gamma, neighbourhood=cfg.neighbourhood)
+
+    @property
+    def sync(self) -> ExperienceMemory:
+        """The wrapped memory, for attributes only (calling it from the loop would block)."""
+        return self._mem
+
+    async def _run(self, fn: Callable[[], T]) -> T:
+        if self._closed:
+            raise RuntimeError("experience memory is closed")
+        return await asyncio.get_running_loop().run_in_executor(self._executor, fn)
+
+    async def append(
+        self,
+        task: str,
+        role: str,
+        uav: str,
+        episode: int,
+        round: int,
+        state_text: str,
+        skill: str,
+        invocation: str,
+    ) -> bool:
+        m = self._mem
+        return await self._run(
+            lambda: m.append(task, role, uav, episode, round, state_text, skill, invocation)
+        )
+
+    async def add_reward(
+        self, uav: str, episode: int, round: int, reward: float, source: str
+    ) -> bool:
+        return await self._run(lambda: self._mem.add_reward(uav, episode, round, reward, source))
+
+    async def finalise(self, uav: str, episode: int) -> int:
+        return await self._run(lambda: self._mem.finalise(uav, episode))
+
+    async def ingest(self, record: ExperienceRecord) -> bool:
+        return await self._run(lambda: self._mem.ingest(record))
+
+    async def warm(self, task: str, role: str) -> int:
+        return await self._run(lambda: self._mem.warm(task, role))
+
+    async def get(self, uav: str, episode: int, round: int) -> StoredRecord | None:
+        return await self._run(lambda: self._mem.get(uav, episode, round))
+
+    async def export(
+        self, uav: str, episode: int, *, final_only: bool = True
+    ) -> list[StoredRecord]:
+        return await self._run(lambda: self._mem.export(uav, episode, final_only=final_only))
+
+    async def export_final(self, uav: str, episode: int) -> list[StoredRecord]:
+        return await self.export(uav, episode, final_only=True)
+
+    async def advantages(
+        self, task: str, role: str, state_text: str, skills: Iterable[str]
+    ) -> dict[str, float]:
+        names = list(skills)  # materialise here: the iterable may not be thread-safe
+        return await self._run(lambda: self._mem.advantages(task, role, state_text, names))
+
+    async def neighbourhood_of(self, task: str, role: str, state_text: str) -> list[Neighbour]:
+        return await self._run(lambda: self._mem.neighbourhood_of(task, role, state_text))
+
+    async def count(self) -> int:
+        return await self._run(lambda: len(self._mem))
+
+    async def aclose(self) -> None:
+        """Close the database in its thread, then stop the thread (idempotent)."""
+        if self._closed:
+            return
+        try:
+            await self._run(self._mem.close)
+        finally:
+            self._closed = True
+            self._executor.shutdown(wait=True)  # the queue is empty: returns at once

@@ -1,0 +1,143 @@
+"""Experience-memory benchmark: retrieval latency and fill rate as the memory grows.
+
+``python -m aeroweaver_edge.bench.memory --records N`` fills a temporary on-disk memory
+with N synthetic coverage records in one (task, role) through the public API (append,
+a reward per round, finalise per episode: the daemon's write path), reopens it as a
+restarted daemon would, and times ``advantages`` for fresh states. Prints one JSON line.
+
+The states imitate a searcher's view of the coverage task (own pose, landmarks and peers
+within sensing range with offsets and distances, peer messages, round), so token sets,
+vocabulary size and posting-list lengths are realistic, not best case.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import random
+import statistics
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from aeroweaver_edge.agent.memory import ExperienceMemory
+
+TASK = "coverage"
+ROLE = "searcher"
+UAVS = ("uav1", "uav2", "uav3")
+ROUNDS = 24
+LANDMARKS = {"L1": (-28.0, 24.0), "L2": (4.0, 34.0), "L3": (32.0, 20.0)}
+SENSING_M = 45.0
+
+
+def _state(rng: random.Random, uav: str, rnd: int) -> tuple[str, list[str]]:
+    """A coverage-like state description and the invocations callable in it."""
+    n, e = rng.uniform(-70, 70), rng.uniform(-70, 70)
+    vn, ve = rng.uniform(-11, 11), rng.uniform(-11, 11)
+    lines = [
+        f"task coverage; role searcher; self {uav}; round {rnd}/{ROUNDS}",
+        f"own pos ({n:.1f}, {e:.1f}) vel ({vn:.1f}, {ve:.1f})",
+    ]
+    options = ["hold_position()", "explore_local()"]
+    for name, (ln, le) in LANDMARKS.items():
+        d = math.hypot(ln - n, le - e)
+        if d <= SENSING_M:
+            lines.append(f"landmark {name} at ({ln - n:+.1f}, {le - e:+.1f}) dist {d:.1f} m")
+            options.append(f"cover_landmark(target={name})")
+    for peer in UAVS:
+        if peer != uav and rng.random() < 0.6:
+            pn, pe = rng.uniform(-45, 45), rng.uniform(-45, 45)
+            lines.append(f"peer {peer} at ({pn:+.1f}, {pe:+.1f}) dist {math.hypot(pn, pe):.1f} m")
+            options.append(f"send_status(to={peer})")
+            if rng.random() < 0.5:
+                lines.append(f"msg from {peer}: status covering {rng.choice(list(LANDMARKS))}")
+    uncovered = [k for k in LANDMARKS if rng.random() < 0.5]
+    lines.append("uncovered: " + (" ".join(uncovered) if uncovered else "none"))
+    return "\n".join(lines), options
+
+
+def _reward(rng: random.Random, invocation: str) -> float:
+    base = {"cover_landmark": -0.4, "explore_local": -0.8, "hold_position": -1.0}
+    return base.get(invocation.split("(")[0], -0.9) + rng.gauss(0.0, 0.3)
+
+
+def fill(memory: ExperienceMemory, records: int, rng: random.Random) -> None:
+    """Append ``records`` decisions, reward each round and finalise each trajectory."""
+    done = 0
+    episode = 0
+    while done < records:
+        episode += 1
+        for uav in UAVS:
+            for rnd in range(ROUNDS):
+                if done >= records:
+                    break
+                text, options = _state(rng, uav, rnd)
+                inv = rng.choice(options)
+                memory.append(TASK, ROLE, uav, episode, rnd, text, inv.split("(")[0], inv)
+                memory.add_reward(uav, episode, rnd, _reward(rng, inv), "bench")
+                done += 1
+            memory.finalise(uav, episode)
+
+
+def _percentile(values: Sequence[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
+
+
+def run(records: int, queries: int = 200, seed: int = 0) -> dict[str, Any]:
+    """Fill, reopen and query a temporary memory; figures in ms, s and bytes."""
+    if records < 1 or queries < 1:
+        raise ValueError("records and queries must be at least 1")
+    rng = random.Random(seed)
+    with tempfile.TemporaryDirectory(prefix="aw-bench-memory-") as tmp:
+        path = Path(tmp) / "memory.sqlite"
+        t0 = time.perf_counter()
+        with ExperienceMemory(path) as memory:
+            fill(memory, records, rng)
+        fill_s = time.perf_counter() - t0
+        db_bytes = sum(p.stat().st_size for p in Path(tmp).iterdir())
+
+        t0 = time.perf_counter()
+        with ExperienceMemory(path) as memory:
+            opened_s = time.perf_counter() - t0
+            probe, probe_opts = _state(rng, "uav1", 0)
+            t0 = time.perf_counter()
+            memory.advantages(TASK, ROLE, probe, probe_opts)  # builds the index
+            index_s = time.perf_counter() - t0
+            latencies = []
+            for q in range(queries):
+                text, options = _state(rng, UAVS[q % len(UAVS)], q % ROUNDS)
+                t0 = time.perf_counter()
+                memory.advantages(TASK, ROLE, text, options)
+                latencies.append((time.perf_counter() - t0) * 1e3)
+    return {
+        "records": records,
+        "queries": queries,
+        "p50_ms": round(statistics.median(latencies), 3),
+        "p99_ms": round(_percentile(latencies, 0.99), 3),
+        "max_ms": round(max(latencies), 3),
+        "fill_s": round(fill_s, 3),
+        "inserts_per_s": round(records / fill_s, 1),
+        "open_s": round(opened_s, 3),
+        "index_build_s": round(index_s, 3),
+        "db_bytes": db_bytes,
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="aeroweaver bench memory", description="Experience-memory retrieval benchmark."
+    )
+    parser.add_argument("--records", type=int, default=10_000, help="records in one role")
+    parser.add_argument("--queries", type=int, default=200, help="timed retrievals")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    print(json.dumps(run(args.records, args.queries, args.seed)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
