@@ -31,7 +31,9 @@ class SelectorInfo:
 
 
 @contextlib.asynccontextmanager
-async def open_selector(cfg: UavConfig, agent_name: str) -> AsyncIterator[tuple[Selector, SelectorInfo]]:
+async def open_selector(
+    cfg: UavConfig, agent_name: str
+) -> AsyncIterator[tuple[Selector, SelectorInfo]]:
     """The selector named in config; an LLM endpoint is probed once before use."""
     if cfg.agent.selector == "scripted":
         yield NearestUncoveredScorer(), SelectorInfo(NearestUncoveredScorer.name)
@@ -56,7 +58,9 @@ async def open_selector(cfg: UavConfig, agent_name: str) -> AsyncIterator[tuple[
             await selector.aclose()
 
 
-def _ports(cfg: UavConfig, mesh: Mesh, headers: HeaderFactory) -> tuple[DaemonPorts, Callable[[], Awaitable[None]], Callable[[], Awaitable[None]]]:
+def _ports(
+    cfg: UavConfig, mesh: Mesh, headers: HeaderFactory
+) -> tuple[DaemonPorts, Callable[[], Awaitable[None]], Callable[[], Awaitable[None]]]:
     if cfg.vehicle.backend == "sim":
         from aeroweaver_edge.vehicle.sim import SimLink
 
@@ -92,10 +96,19 @@ async def run_daemon(
 
             memory = await AsyncExperienceMemory.from_config(cfg.agent)
             stack.push_async_callback(memory.aclose)
+        assert selector is not None
         daemon = UavDaemon(
-            cfg, mesh=mesh, ports=ports, selector=selector, registry=registry, headers=headers,
-            memory=memory, uav_index=cfg.uav_index, altitude_m=cfg.vehicle.altitude_m,
-            round_s=cfg.round_s, on_round=on_round,
+            cfg,
+            mesh=mesh,
+            ports=ports,
+            selector=selector,
+            registry=registry,
+            headers=headers,
+            memory=memory,
+            uav_index=cfg.uav_index,
+            altitude_m=cfg.vehicle.altitude_m,
+            round_s=cfg.round_s,
+            on_round=on_round,
         )
         if on_ready is not None:
             on_ready(daemon)

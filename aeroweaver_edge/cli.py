@@ -49,9 +49,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from aeroweaver_edge.sim.view import LiveView, print_summary
 
     opts = SwarmOptions(
-        task=args.task, uavs=args.uavs, seed=args.seed, episodes=args.episodes,
-        max_rounds=args.rounds, processes=args.processes, selector=args.selector,
-        llm=_llm_from_args(args), beta=args.beta,
+        task=args.task,
+        uavs=args.uavs,
+        seed=args.seed,
+        episodes=args.episodes,
+        max_rounds=args.rounds,
+        processes=args.processes,
+        selector=args.selector,
+        llm=_llm_from_args(args),
+        beta=args.beta,
         memory_dir=Path(args.memory_dir) if args.memory_dir else None,
         deadline_s=args.deadline,
     )
@@ -71,7 +77,11 @@ def cmd_daemon(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, UavConfig)
     stats = _run(run_daemon(cfg))
     logging.getLogger("aeroweaver").info(
-        "%s: %d rounds, %d holds, %d messages sent", cfg.uav, stats.rounds, stats.holds, stats.messages_sent
+        "%s: %d rounds, %d holds, %d messages sent",
+        cfg.uav,
+        stats.rounds,
+        stats.holds,
+        stats.messages_sent,
     )
     return 0
 
@@ -96,7 +106,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def _add_llm_flags(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--llm", metavar="URL", help="OpenAI-compatible base URL (default: embedded SmolLM2)")
+    p.add_argument(
+        "--llm", metavar="URL", help="OpenAI-compatible base URL (default: embedded SmolLM2)"
+    )
     p.add_argument("--model", help="model name at that endpoint")
     p.add_argument("--api-key-env", help="name of the environment variable holding the API key")
     p.add_argument("--llm-deadline", type=float, help="seconds per LLM decision (default 20)")
@@ -115,7 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--rounds", type=int, default=24, help="horizon in rounds")
     s.add_argument("--processes", action="store_true", help="one OS process per daemon")
     s.add_argument("--selector", choices=["llm", "scripted"], default="llm")
-    s.add_argument("--beta", type=float, default=0.8, help="experience correction weight (0: plain)")
+    s.add_argument(
+        "--beta", type=float, default=0.8, help="experience correction weight (0: plain)"
+    )
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
     s.add_argument("--deadline", type=float, default=30.0, help="seconds a round may take")
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")

@@ -18,7 +18,9 @@ _ID_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_-")
 
 def _check_id(value: str, what: str) -> str:
     if not value or not set(value) <= _ID_CHARS or value[0] == "@":
-        raise ValueError(f"{what} {value!r} must be non-empty lowercase letters, digits, '_' or '-'")
+        raise ValueError(
+            f"{what} {value!r} must be non-empty lowercase letters, digits, '_' or '-'"
+        )
     return value
 
 
@@ -72,6 +74,9 @@ class AgentConfig(_Section):
 
 class SafetyConfig(_Section):
     """The physical envelope every command must fit, whatever chose it."""
+
+    # NaN/inf would silently open the envelope (``max(x, nan)`` is ``x``; ``inf`` is no cap).
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     geofence_north_m: tuple[float, float] = (-70.0, 70.0)
     geofence_east_m: tuple[float, float] = (-70.0, 70.0)
@@ -171,7 +176,9 @@ def load_config(path: str | Path, model: type[M]) -> M:
     try:
         data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {exc}") from None
+        raise ConfigError(
+            f"{path}: not valid {path.suffix.lstrip('.').upper() or 'TOML'}: {exc}"
+        ) from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: the top level must be a table of settings")
     return parse_config(data, model, str(path))

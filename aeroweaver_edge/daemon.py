@@ -11,7 +11,7 @@ import contextlib
 import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from aeroweaver_edge.skills import SkillRegistry
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 @dataclass
@@ -95,23 +96,31 @@ class UavDaemon:
         self._warmed: tuple[str, str] | None = None
         self._tasks: list[asyncio.Task[Any]] = []
         self.rc = RoundContext(
-            uav=cfg.uav, uav_index=uav_index, registry=registry, selector=selector,
-            gate=SafetyGate(cfg.safety, horizon_s=round_s), vehicle=ports.vehicle,
-            perception=ports.perception, link=self.link, agent=cfg.agent, memory=memory,
-            altitude_m=altitude_m, sensing_radius_m=sensing_radius_m,
+            uav=cfg.uav,
+            uav_index=uav_index,
+            registry=registry,
+            selector=selector,
+            gate=SafetyGate(cfg.safety, horizon_s=round_s),
+            vehicle=ports.vehicle,
+            perception=ports.perception,
+            link=self.link,
+            agent=cfg.agent,
+            memory=memory,
+            altitude_m=altitude_m,
+            sensing_radius_m=sensing_radius_m,
         )
 
     async def _pump_context(self) -> None:
         async for _key, msg in self.mesh.subscribe(self.keys.context, MissionContext):
-            self._changed(lambda: self.mission.update_context(msg))
+            self._changed(self.mission.update_context, msg)
 
     async def _pump_assignment(self) -> None:
         async for _key, msg in self.mesh.subscribe(self.keys.assign(self.uav), Assignment):
-            self._changed(lambda: self.mission.update_assignment(msg))
+            self._changed(self.mission.update_assignment, msg)
 
-    def _changed(self, update: Callable[[], None]) -> None:
+    def _changed(self, update: Callable[[T], None], msg: T) -> None:
         before = self.mission.changes
-        update()
+        update(msg)
         if self.mission.changes != before:
             self._announce()
 
@@ -123,9 +132,18 @@ class UavDaemon:
         self.mesh.put(
             self.keys.report(self.uav),
             ProgressReport(
-                h=self.headers.next(), phase="ready", uav=self.uav, mission_id=view.mission_id,
-                episode=-1, round=-1, role=view.role, skill="", invocation="", label=None,
-                held=True, decode_errors=self.mesh.codec.stats.total,
+                h=self.headers.next(),
+                phase="ready",
+                uav=self.uav,
+                mission_id=view.mission_id,
+                episode=-1,
+                round=-1,
+                role=view.role,
+                skill="",
+                invocation="",
+                label=None,
+                held=True,
+                decode_errors=self.mesh.codec.stats.total,
             ),
         )
 
@@ -151,7 +169,9 @@ class UavDaemon:
             asyncio.create_task(self._pump_assignment(), name=f"{self.uav}-assignment"),
         ]
         if self.memory is not None and self.cfg.agent.share_experience:
-            self._tasks.append(asyncio.create_task(self._pump_experience(), name=f"{self.uav}-experience"))
+            self._tasks.append(
+                asyncio.create_task(self._pump_experience(), name=f"{self.uav}-experience")
+            )
         try:
             await self.link.start()
             await self._catch_up()
@@ -206,14 +226,25 @@ class UavDaemon:
         self.mesh.put(
             self.keys.report(self.uav),
             ProgressReport(
-                h=self.headers.next(), uav=self.uav, mission_id=view.mission_id if view else "",
-                episode=out.episode, round=out.round, role=view.role if view else "",
-                skill=out.skill, invocation=out.invocation, label=out.label, held=out.held,
-                hold_reason=out.hold_reason, reward=self._last_reward,
+                h=self.headers.next(),
+                uav=self.uav,
+                mission_id=view.mission_id if view else "",
+                episode=out.episode,
+                round=out.round,
+                role=view.role if view else "",
+                skill=out.skill,
+                invocation=out.invocation,
+                label=out.label,
+                held=out.held,
+                hold_reason=out.hold_reason,
+                reward=self._last_reward,
                 prompt_tokens=sc.prompt_tokens if sc else 0,
                 completion_tokens=sc.completion_tokens if sc else 0,
-                latency_s=out.latency_s, messages_sent=len(out.sent), messages_dropped=out.dropped,
-                decode_errors=self.mesh.codec.stats.total, corrected=out.corrected,
+                latency_s=out.latency_s,
+                messages_sent=len(out.sent),
+                messages_dropped=out.dropped,
+                decode_errors=self.mesh.codec.stats.total,
+                corrected=out.corrected,
             ),
         )
 
@@ -221,7 +252,14 @@ class UavDaemon:
         if self.memory is None or view is None or not out.chosen_by_agent:
             return
         await self.memory.append(
-            view.task, view.role, self.uav, out.episode, out.round, out.state_text, out.skill, out.invocation
+            view.task,
+            view.role,
+            self.uav,
+            out.episode,
+            out.round,
+            out.state_text,
+            out.skill,
+            out.invocation,
         )
 
     async def _absorb_rewards(self) -> None:
@@ -238,5 +276,7 @@ class UavDaemon:
         if self.memory is None or not self.cfg.agent.share_experience:
             return
         for rec in await self.memory.export_final(self.uav, episode):
-            self.mesh.put(self.keys.experience(self.uav), rec.to_wire(self.headers.next()), block=True)
+            self.mesh.put(
+                self.keys.experience(self.uav), rec.to_wire(self.headers.next()), block=True
+            )
             self.stats.experience_shared += 1

@@ -76,7 +76,9 @@ class RoundContext:
     memo: dict[str, str] = field(default_factory=dict)
 
 
-async def _advantages(rc: RoundContext, view: MissionView, state_text: str, cs: CandidateSet) -> dict[str, float]:
+async def _advantages(
+    rc: RoundContext, view: MissionView, state_text: str, cs: CandidateSet
+) -> dict[str, float]:
     if rc.memory is None or rc.agent.beta == 0:
         return {}
     by_skill: Mapping[str, float] = await rc.memory.advantages(
@@ -85,7 +87,14 @@ async def _advantages(rc: RoundContext, view: MissionView, state_text: str, cs: 
     return {c.label: by_skill.get(c.skill, 0.0) for c in cs.candidates}
 
 
-def _execute(rc: RoundContext, skill: str, cs: CandidateSet, choice: Choice, obs: Observation, ctx: SkillContext) -> Intent:
+def _execute(
+    rc: RoundContext,
+    skill: str,
+    cs: CandidateSet,
+    choice: Choice,
+    obs: Observation,
+    ctx: SkillContext,
+) -> Intent:
     assert choice.label is not None
     try:
         return rc.registry.get(skill).execute(cs.params[choice.label], obs, ctx)
@@ -111,8 +120,15 @@ async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None)
     except TimeoutError:
         await rc.vehicle.hold()
         out = RoundOutcome(
-            tick.episode, tick.round, HOLD_SKILL, "hold_position()", None, True,
-            f"missed the {budget:.1f} s round deadline", "deadline", (0.0, 0.0, 0.0),
+            tick.episode,
+            tick.round,
+            HOLD_SKILL,
+            "hold_position()",
+            None,
+            True,
+            f"missed the {budget:.1f} s round deadline",
+            "deadline",
+            (0.0, 0.0, 0.0),
             latency_s=time.monotonic() - started,
         )
     return out
@@ -120,22 +136,39 @@ async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None)
 
 def _held(tick: RoundTick, why: str, state_text: str, started: float, **kw: object) -> RoundOutcome:
     return RoundOutcome(
-        tick.episode, tick.round, HOLD_SKILL, "hold_position()", None, True, why, why,
-        (0.0, 0.0, 0.0), state_text=state_text, latency_s=time.monotonic() - started, **kw,  # type: ignore[arg-type]
+        tick.episode,
+        tick.round,
+        HOLD_SKILL,
+        "hold_position()",
+        None,
+        True,
+        why,
+        why,
+        (0.0, 0.0, 0.0),
+        state_text=state_text,
+        latency_s=time.monotonic() - started,
+        **kw,  # type: ignore[arg-type]
     )
 
 
-async def _decide_and_act(rc: RoundContext, tick: RoundTick, view: MissionView | None, started: float) -> RoundOutcome:
+async def _decide_and_act(
+    rc: RoundContext, tick: RoundTick, view: MissionView | None, started: float
+) -> RoundOutcome:
     # 2. Observe, frozen for the round.
     own, entities = await rc.perception.sense(tick)
     rc.link.publish_beacon(
-        round=tick.round, pos=own.pos, vel=own.vel,
-        role=view.role if view else "", status="nominal" if view else "waiting",
+        round=tick.round,
+        pos=own.pos,
+        vel=own.vel,
+        role=view.role if view else "",
+        status="nominal" if view else "waiting",
     )
     messages = await rc.link.collect_inbox(
         expect=tick.expect, timeout_s=rc.inbox_wait_s, max_round=tick.round - 1
     )
-    obs = Observation(rc.uav, tick.episode, tick.round, own, tuple(entities), tuple(messages), dict(rc.memo))
+    obs = Observation(
+        rc.uav, tick.episode, tick.round, own, tuple(entities), tuple(messages), dict(rc.memo)
+    )
     state_text = describe(obs)
     if view is None:
         await rc.vehicle.hold()
@@ -143,8 +176,12 @@ async def _decide_and_act(rc: RoundContext, tick: RoundTick, view: MissionView |
 
     # 3. Candidates from the active subset.
     ctx = SkillContext(
-        uav=rc.uav, uav_index=rc.uav_index, role=view.role, task=view.task,
-        altitude_m=rc.altitude_m, sensing_radius_m=rc.sensing_radius_m,
+        uav=rc.uav,
+        uav_index=rc.uav_index,
+        role=view.role,
+        task=view.task,
+        altitude_m=rc.altitude_m,
+        sensing_radius_m=rc.sensing_radius_m,
     )
     cs = build_candidates(rc.registry, view.skills, obs, ctx, rc.agent.max_labels)
     if cs.overflow:
@@ -156,17 +193,23 @@ async def _decide_and_act(rc: RoundContext, tick: RoundTick, view: MissionView |
 
     # 4. Select: base scores from the selector, corrected by experience.
     request = DecisionRequest(
-        observation=obs, mission_text=view.text, role=view.role, local_goal=view.local_goal,
+        observation=obs,
+        mission_text=view.text,
+        role=view.role,
+        local_goal=view.local_goal,
         constraints=view.constraints,
         skill_docs=[rc.registry.get(s).prompt_text() for s in view.skills if s in rc.registry],
-        observation_text=state_text, candidates=cs.candidates,
+        observation_text=state_text,
+        candidates=cs.candidates,
     )
     scores = await rc.selector.score(request)
     advantages = await _advantages(rc, view, state_text, cs)
     choice = choose(scores, cs.labels, advantages, rc.agent.beta)
     if choice.label is None:
         await rc.vehicle.hold()
-        return _held(tick, choice.reason, state_text, started, scores=scores, n_candidates=len(cs.candidates))
+        return _held(
+            tick, choice.reason, state_text, started, scores=scores, n_candidates=len(cs.candidates)
+        )
     cand = next(c for c in cs.candidates if c.label == choice.label)
 
     # 5. Gate and execute on this UAV's own vehicle only.
@@ -182,15 +225,31 @@ async def _decide_and_act(rc: RoundContext, tick: RoundTick, view: MissionView |
     for m in intent.messages:
         targets = sorted(rc.link.roster - {rc.uav}) if m.to == "*" else [m.to]
         for to in targets:
-            ref = await rc.link.send(to, m.kind, dict(m.body), round=tick.round, min_round=tick.round)
+            ref = await rc.link.send(
+                to, m.kind, dict(m.body), round=tick.round, min_round=tick.round
+            )
             if ref is None:
                 dropped += 1
             else:
                 sent.append(ref)
     return RoundOutcome(
-        tick.episode, tick.round, cand.skill, cand.text, cand.label, gated.held,
-        "; ".join(gated.violations) if gated.held else None, choice.reason, gated.vel,
-        state_text=state_text, corrected=choice.corrected, sent=tuple(sent), dropped=dropped,
-        scores=scores, n_candidates=len(cs.candidates), latency_s=time.monotonic() - started,
-        violations=gated.violations, chosen_by_agent=True, memo=dict(intent.memo),
+        tick.episode,
+        tick.round,
+        cand.skill,
+        cand.text,
+        cand.label,
+        gated.held,
+        "; ".join(gated.violations) if gated.held else None,
+        choice.reason,
+        gated.vel,
+        state_text=state_text,
+        corrected=choice.corrected,
+        sent=tuple(sent),
+        dropped=dropped,
+        scores=scores,
+        n_candidates=len(cs.candidates),
+        latency_s=time.monotonic() - started,
+        violations=gated.violations,
+        chosen_by_agent=True,
+        memo=dict(intent.memo),
     )

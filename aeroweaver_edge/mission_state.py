@@ -16,7 +16,10 @@ class MissionState:
     changes: int = 0  # how often the view changed: a new view means a rebuilt prompt context
 
     def update_context(self, ctx: MissionContext) -> None:
-        if self.context is None or (ctx.h.epoch, ctx.h.seq) > (self.context.h.epoch, self.context.h.seq):
+        if self.context is None or (ctx.h.epoch, ctx.h.seq) > (
+            self.context.h.epoch,
+            self.context.h.seq,
+        ):
             self.context = ctx
             self.changes += 1
 

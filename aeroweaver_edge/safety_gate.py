@@ -48,6 +48,15 @@ class SafetyGate:
             _clip(p[2], -alt_hi, -alt_lo),
         )
 
+    def _cap(self, vel: Vec3, notes: list[str]) -> Vec3:
+        speed = math.hypot(*vel)  # hypot: squares of huge components would overflow to inf
+        if speed > self.cfg.max_speed_mps:
+            k = self.cfg.max_speed_mps / speed
+            vel = (vel[0] * k, vel[1] * k, vel[2] * k)
+            if "speed capped" not in notes:
+                notes.append("speed capped")
+        return vel
+
     def gate(self, motion: Motion, pos: Vec3, neighbours: Sequence[Vec3] = ()) -> GatedCommand:
         if isinstance(motion, Hold):
             return GatedCommand(ZERO, held=True)
@@ -55,19 +64,31 @@ class SafetyGate:
             return GatedCommand(ZERO, True, ("own position not finite",))
         notes: list[str] = []
         if isinstance(motion, MoveTo):
-            if not _finite(motion.target) or (motion.speed is not None and not math.isfinite(motion.speed)):
+            if not _finite(motion.target) or (
+                motion.speed is not None and not math.isfinite(motion.speed)
+            ):
                 return GatedCommand(ZERO, True, ("non-finite target",))
+            if motion.speed is not None and motion.speed < 0:
+                return GatedCommand(ZERO, True, (f"negative speed {motion.speed}",))
             target = self._inside(motion.target)
             if target != motion.target:
                 notes.append("target clamped into envelope")
             delta = tuple(t - p for t, p in zip(target, pos, strict=True))
-            dist = math.sqrt(sum(d * d for d in delta))
-            cap = self.cfg.max_speed_mps if motion.speed is None else min(motion.speed, self.cfg.max_speed_mps)
+            dist = math.hypot(*delta)
+            cap = (
+                self.cfg.max_speed_mps
+                if motion.speed is None
+                else min(motion.speed, self.cfg.max_speed_mps)
+            )
             speed = min(cap, dist / self.horizon_s)
-            vel: Vec3 = ZERO if dist < 1e-9 else (
-                delta[0] / dist * speed,
-                delta[1] / dist * speed,
-                delta[2] / dist * speed,
+            vel: Vec3 = (
+                ZERO
+                if dist < 1e-9
+                else (
+                    delta[0] / dist * speed,
+                    delta[1] / dist * speed,
+                    delta[2] / dist * speed,
+                )
             )
         elif isinstance(motion, SetVelocity):
             if not _finite(motion.vel):
@@ -76,11 +97,7 @@ class SafetyGate:
         else:  # pragma: no cover - exhaustive over Motion
             return GatedCommand(ZERO, True, (f"unknown motion {type(motion).__name__}",))
 
-        speed = math.sqrt(sum(v * v for v in vel))
-        if speed > self.cfg.max_speed_mps:
-            k = self.cfg.max_speed_mps / speed
-            vel = (vel[0] * k, vel[1] * k, vel[2] * k)
-            notes.append("speed capped")
+        vel = self._cap(vel, notes)
 
         # Keep the predicted position inside the envelope (a velocity can carry us out).
         ahead = tuple(p + v * self.horizon_s for p, v in zip(pos, vel, strict=True))
@@ -92,6 +109,8 @@ class SafetyGate:
                 (inside[2] - pos[2]) / self.horizon_s,
             )
             notes.append("velocity clamped at envelope edge")
+            # From outside the envelope the way back can be longer than one horizon allows.
+            vel = self._cap(vel, notes)
 
         # Never close in on a neighbour that is already, or would become, too near.
         sep = self.cfg.min_separation_m
@@ -103,5 +122,7 @@ class SafetyGate:
                 now_d = math.dist(pos, other)
                 next_d = math.dist(nxt, other)
                 if next_d < sep and next_d < now_d:
-                    return GatedCommand(ZERO, True, (*notes, f"separation {next_d:.1f} m < {sep} m"))
+                    return GatedCommand(
+                        ZERO, True, (*notes, f"separation {next_d:.1f} m < {sep} m")
+                    )
         return GatedCommand(vel, held=False, violations=tuple(notes))

@@ -273,12 +273,21 @@ class DecodeStats:
     def total(self) -> int:
         return sum(self.rejected.values())
 
-    def reject(self, reason: str, key: str) -> None:
+    def reject(self, reason: str, key: str, detail: str = "") -> None:
+        """Count under ``reason``, a fixed category: payload-derived text goes in ``detail``
+        (logged only), so a flood of distinct bad payloads cannot grow the counter or
+        defeat the rate limit."""
         self.rejected[reason] += 1
         now = time.monotonic()
         if now - self._last_log.get(reason, -1e9) >= self._interval:
             self._last_log[reason] = now
-            log.warning("dropped payload on %s: %s (%d so far)", key, reason, self.rejected[reason])
+            log.warning(
+                "dropped payload on %s: %s%s (%d so far)",
+                key,
+                reason,
+                f": {detail[:80]}" if detail else "",
+                self.rejected[reason],
+            )
 
 
 class Codec:
@@ -304,12 +313,16 @@ class Codec:
             decoder = self._decoders[kind] = msgspec.msgpack.Decoder(kind)
         try:
             msg: T = decoder.decode(data)
-        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-            self.stats.reject(f"undecodable {kind.__name__}: {str(exc)[:80]}", key)
+        except msgspec.ValidationError as exc:
+            self.stats.reject(f"invalid {kind.__name__}", key, str(exc))
+            return None
+        except (msgspec.DecodeError, ValueError) as exc:
+            # ValueError: msgspec raises UnicodeDecodeError for a str that is not UTF-8.
+            self.stats.reject(f"undecodable {kind.__name__}", key, str(exc))
             return None
         header = getattr(msg, "h", None)
         if isinstance(header, Header) and header.v != SCHEMA_VERSION:
-            self.stats.reject(f"schema v{header.v}", key)
+            self.stats.reject("schema version", key, f"v{header.v}")
             return None
         return msg
 
@@ -324,7 +337,9 @@ class HeaderFactory:
 
     def next(self, ttl_s: float = 10.0) -> Header:
         self._seq += 1
-        return Header(sender=self.sender, epoch=self.epoch, seq=self._seq, stamp=time.time(), ttl_s=ttl_s)
+        return Header(
+            sender=self.sender, epoch=self.epoch, seq=self._seq, stamp=time.time(), ttl_s=ttl_s
+        )
 
     @property
     def last_seq(self) -> int:

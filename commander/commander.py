@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 from typing import TYPE_CHECKING
 
 from aeroweaver_edge.wire import Assignment, HeaderFactory, Keys, MissionContext, ProgressReport
@@ -67,18 +68,28 @@ class Commander:
         if self.board.mission_id != plan.mission_id:
             self.board = ProgressBoard(plan.mission_id)
         self._context = MissionContext(
-            h=self.headers.next(), mission_id=plan.mission_id, task=plan.task, text=plan.text,
-            constraints=list(plan.constraints), participants=plan.participants, episode=episode,
+            h=self.headers.next(),
+            mission_id=plan.mission_id,
+            task=plan.task,
+            text=plan.text,
+            constraints=list(plan.constraints),
+            participants=plan.participants,
+            episode=episode,
         )
         self.mesh.put(self.keys.context, self._context, block=True)
         for uav, a in sorted(plan.assignments.items()):
             key = self.keys.assign(uav)
             msg = Assignment(
-                h=self.headers.next(), mission_id=plan.mission_id, uav=uav, role=a.role,
-                local_goal=a.local_goal, skills=list(a.skills), revision=self._revision,
+                h=self.headers.next(),
+                mission_id=plan.mission_id,
+                uav=uav,
+                role=a.role,
+                local_goal=a.local_goal,
+                skills=list(a.skills),
+                revision=self._revision,
             )
             self._assignments[uav] = msg
             if key not in self._queryables:
                 self._queryables.add(key)
-                self.mesh.declare_queryable(key, lambda uav=uav: self._assignments.get(uav))
+                self.mesh.declare_queryable(key, functools.partial(self._assignments.get, uav))
             self.mesh.put(key, msg, block=True)

@@ -5,6 +5,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from commander.task_record import TaskRecord
 
 
 @dataclass(frozen=True)
@@ -23,6 +27,10 @@ class MissionPlan:
     constraints: tuple[str, ...] = ()
     setup_tokens: int = 0  # LLM tokens spent once on parsing, roles and activation
     notes: tuple[str, ...] = field(default_factory=tuple)
+    record: TaskRecord | None = None  # the parsed task record (None for a template plan)
+    parse_source: str = "template"  # "llm" | "fallback" | "template"
+    roles_source: str = "template"  # "llm" | "template"
+    catalogue: tuple[str, ...] = ()  # task-level candidate skills A^t, best first
 
     @property
     def participants(self) -> list[str]:
@@ -46,7 +54,9 @@ def known_tasks() -> list[str]:
     return sorted(_TEMPLATES)
 
 
-def template_plan(task: str, uavs: Sequence[str], mission_id: str, text: str | None = None) -> MissionPlan:
+def template_plan(
+    task: str, uavs: Sequence[str], mission_id: str, text: str | None = None
+) -> MissionPlan:
     """The fixed plan for a known task: every UAV gets the task's role and skill subset."""
     if task not in _TEMPLATES:
         raise ValueError(f"no template for task {task!r}; known: {', '.join(known_tasks())}")

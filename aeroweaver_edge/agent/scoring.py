@@ -93,7 +93,10 @@ def choose(
     winner = _argmax(corrected, labels)
     if winner != base_winner:
         for lb in labels:
-            if lb not in base and scores.omitted_bound + beta * advantages.get(lb, 0.0) > corrected[winner]:
+            if (
+                lb not in base
+                and scores.omitted_bound + beta * advantages.get(lb, 0.0) > corrected[winner]
+            ):
                 return Choice(
                     base_winner,
                     f"bound rule: omitted {lb} could beat corrected {winner}",

@@ -15,7 +15,7 @@ import time
 from collections import defaultdict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -127,14 +127,24 @@ class WorldRunner:
                     await self._changed.wait()
         return set(uavs) - self.alive
 
-    def _publish_episode(self, episode: int, phase: str, reason: str = "") -> None:
+    def _publish_episode(
+        self, episode: int, phase: Literal["start", "end", "shutdown"], reason: str = ""
+    ) -> None:
         self.mesh.put(
             self.keys.sim_episode,
-            SimEpisode(h=self.headers.next(), episode=episode, task=self.task.name, phase=phase, reason=reason),  # type: ignore[arg-type]
+            SimEpisode(
+                h=self.headers.next(),
+                episode=episode,
+                task=self.task.name,
+                phase=phase,
+                reason=reason,
+            ),
             block=True,
         )
 
-    async def _collect(self, key: tuple[int, int], expected: set[str]) -> tuple[dict[str, SimCommand], float]:
+    async def _collect(
+        self, key: tuple[int, int], expected: set[str]
+    ) -> tuple[dict[str, SimCommand], float]:
         started = time.monotonic()
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(self.cfg.deadline_s):
@@ -161,9 +171,15 @@ class WorldRunner:
                 self.mesh.put(
                     self.keys.sim_perception(uav),
                     SimPerception(
-                        h=self.headers.next(), uav=uav, episode=episode, round=rnd,
-                        deadline_s=self.cfg.deadline_s, pos=body.pos, vel=body.vel,
-                        entities=self.task.visible(world, uav), expected_inbox=inbox.pop(uav, []),
+                        h=self.headers.next(),
+                        uav=uav,
+                        episode=episode,
+                        round=rnd,
+                        deadline_s=self.cfg.deadline_s,
+                        pos=body.pos,
+                        vel=body.vel,
+                        entities=self.task.visible(world, uav),
+                        expected_inbox=inbox.pop(uav, []),
                     ),
                     block=True,
                 )
@@ -185,8 +201,13 @@ class WorldRunner:
                 self.mesh.put(
                     self.keys.sim_reward(uav),
                     SimReward(
-                        h=self.headers.next(), uav=uav, episode=episode, round=rnd,
-                        reward=res.rewards.get(uav, 0.0), done=res.done, reason=res.reason or "",
+                        h=self.headers.next(),
+                        uav=uav,
+                        episode=episode,
+                        round=rnd,
+                        reward=res.rewards.get(uav, 0.0),
+                        done=res.done,
+                        reason=res.reason or "",
                     ),
                     block=True,
                 )

@@ -51,7 +51,7 @@ class SwarmOptions:
     max_rounds: int = 24
     processes: bool = False
     selector: Literal["llm", "scripted"] = "llm"
-    llm: LLMConfig = LLMConfig()
+    llm: LLMConfig = field(default_factory=LLMConfig)
     beta: float = 0.8
     gamma: float = 0.95
     memory_dir: Path | None = None  # None: a fresh temporary directory per run
@@ -126,7 +126,9 @@ def free_port() -> int:
 def _mesh_configs(namespace: str) -> tuple[MeshConfig, MeshConfig]:
     port = free_port()
     seed = MeshConfig(listen=[f"tcp/127.0.0.1:{port}"], namespace=namespace)
-    peer = MeshConfig(listen=["tcp/127.0.0.1:0"], connect=[f"tcp/127.0.0.1:{port}"], namespace=namespace)
+    peer = MeshConfig(
+        listen=["tcp/127.0.0.1:0"], connect=[f"tcp/127.0.0.1:{port}"], namespace=namespace
+    )
     return seed, peer
 
 
@@ -157,14 +159,23 @@ class _Daemons:
             if self.processes:
                 path = self.workdir / f"{cfg.uav}.json"
                 path.write_text(cfg.model_dump_json(indent=2), encoding="utf-8")
-                log = open(self.workdir / f"{cfg.uav}.log", "wb")  # noqa: SIM115 - owned by the child
+                log = (self.workdir / f"{cfg.uav}.log").open("wb")  # the child inherits it
                 self.procs[cfg.uav] = await asyncio.create_subprocess_exec(
-                    sys.executable, "-m", "aeroweaver_edge.cli", "daemon", "--config", str(path),
-                    stdin=asyncio.subprocess.DEVNULL, stdout=log, stderr=log,
+                    sys.executable,
+                    "-m",
+                    "aeroweaver_edge.cli",
+                    "daemon",
+                    "--config",
+                    str(path),
+                    stdin=asyncio.subprocess.DEVNULL,
+                    stdout=log,
+                    stderr=log,
                 )
                 log.close()
             else:
-                self.tasks[cfg.uav] = asyncio.create_task(run_daemon(cfg, registry=registry), name=cfg.uav)
+                self.tasks[cfg.uav] = asyncio.create_task(
+                    run_daemon(cfg, registry=registry), name=cfg.uav
+                )
 
     async def kill(self, uav: str) -> None:
         """Fault injection: the daemon dies abruptly (process SIGKILL, or task cancelled)."""
@@ -192,7 +203,9 @@ class _Daemons:
         waits = [*self.tasks.values()]
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(timeout_s):
-                await asyncio.gather(*waits, *(p.wait() for p in self.procs.values()), return_exceptions=True)
+                await asyncio.gather(
+                    *waits, *(p.wait() for p in self.procs.values()), return_exceptions=True
+                )
         for t in self.tasks.values():
             t.cancel()
         await asyncio.gather(*self.tasks.values(), return_exceptions=True)
@@ -214,7 +227,10 @@ async def _shared_llm(opts: SwarmOptions) -> AsyncIterator[tuple[LLMConfig, str]
     from aeroweaver_edge.llm.embedded import EmbeddedServer
 
     async with EmbeddedServer() as server:
-        yield opts.llm.model_copy(update={"base_url": server.base_url, "model": server.model}), "embedded"
+        yield (
+            opts.llm.model_copy(update={"base_url": server.base_url, "model": server.model}),
+            "embedded",
+        )
 
 
 async def _probe(llm: LLMConfig) -> str:
@@ -235,12 +251,22 @@ async def run_swarm(
     started = time.monotonic()
     task = make_task(opts.task, opts.uavs, max_rounds=opts.max_rounds)
     sim_cfg = SimConfig(
-        task=opts.task, uavs=opts.uavs, seed=opts.seed, max_rounds=opts.max_rounds, deadline_s=opts.deadline_s
+        task=opts.task,
+        uavs=opts.uavs,
+        seed=opts.seed,
+        max_rounds=opts.max_rounds,
+        deadline_s=opts.deadline_s,
     )
     namespace = f"aw-{uuid.uuid4().hex[:10]}"
     seed_mesh_cfg, peer_mesh_cfg = _mesh_configs(namespace)
     uavs = task.uav_ids
-    summary = RunSummary(opts.task, opts.seed, opts.uavs, "processes" if opts.processes else "in-process", opts.selector)
+    summary = RunSummary(
+        opts.task,
+        opts.seed,
+        opts.uavs,
+        "processes" if opts.processes else "in-process",
+        opts.selector,
+    )
 
     async with contextlib.AsyncExitStack() as stack:
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="aeroweaver-")))
@@ -277,10 +303,16 @@ async def run_swarm(
 
         configs = [
             UavConfig(
-                uav=u, swarm=opts.swarm, mesh=peer_mesh_cfg, llm=llm,
+                uav=u,
+                swarm=opts.swarm,
+                mesh=peer_mesh_cfg,
+                llm=llm,
                 agent=AgentConfig(
-                    selector=opts.selector, beta=opts.beta, gamma=opts.gamma,
-                    memory_path=str(memory_dir / f"{u}.sqlite3"), share_experience=opts.share_experience,
+                    selector=opts.selector,
+                    beta=opts.beta,
+                    gamma=opts.gamma,
+                    memory_path=str(memory_dir / f"{u}.sqlite3"),
+                    share_experience=opts.share_experience,
                 ),
             )
             for u in uavs
@@ -289,8 +321,10 @@ async def run_swarm(
         stack.push_async_callback(daemons.stop)
         await daemons.start()
 
-        plan = await plan_factory(uavs) if plan_factory else template_plan(
-            opts.task, uavs, f"{opts.task}-s{opts.seed}", opts.mission_text
+        plan = (
+            await plan_factory(uavs)
+            if plan_factory
+            else template_plan(opts.task, uavs, f"{opts.task}-s{opts.seed}", opts.mission_text)
         )
         summary.setup_tokens = plan.setup_tokens
         commander.publish(plan)
@@ -316,7 +350,8 @@ async def run_swarm(
         summary.holds = sum(p.holds for p in board.uavs.values())
         summary.deadline_misses = runner.stats.deadline_misses
         summary.decode_errors = (
-            world_mesh.codec.stats.total + cmdr_mesh.codec.stats.total
+            world_mesh.codec.stats.total
+            + cmdr_mesh.codec.stats.total
             + sum((p.last.decode_errors if p.last else 0) for p in board.uavs.values())
         )
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
@@ -331,5 +366,3 @@ async def run_swarm(
 def write_json(summary: RunSummary, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(summary.as_dict(), indent=2, default=str) + "\n", encoding="utf-8")
-
-

@@ -24,12 +24,17 @@ class LiveView:
             rep = board.uavs.get(uav)
             last = rep.last if rep else None
             what = "absent" if uav in log.absent else ("missed" if uav in log.missed else "")
-            if not what and last is not None and (last.episode, last.round) == (log.episode, log.round):
+            if (
+                not what
+                and last is not None
+                and (last.episode, last.round) == (log.episode, log.round)
+            ):
                 what = ("HOLD " if last.held else "") + last.invocation
             parts.append(f"{uav} {what or '?'} r={res.rewards[uav]:+.2f}")
         status = f" [{res.reason}]" if res.done else ""
         self.console.print(
-            f"ep {log.episode} round {log.round + 1:2d} | " + " | ".join(parts)
+            f"ep {log.episode} round {log.round + 1:2d} | "
+            + " | ".join(parts)
             + f" | stable {res.stable_rounds}{status} ({log.wait_s:.2f} s)",
             soft_wrap=True,
         )
@@ -37,7 +42,8 @@ class LiveView:
 
 def print_summary(summary: dict[str, Any], console: Console | None = None) -> None:
     console = console or Console()
-    t = Table(title=f"{summary['task']} · seed {summary['seed']} · {summary['mode']} · {summary['selector']}")
+    s = summary
+    t = Table(title=f"{s['task']} · seed {s['seed']} · {s['mode']} · {s['selector']}")
     t.add_column("episode")
     t.add_column("rounds")
     t.add_column("end")
@@ -46,24 +52,30 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
         t.add_column(uav)
     for ep in summary["episodes"]:
         t.add_row(
-            str(ep["episode"]), str(ep["rounds"]), ep["reason"], f"{ep['team_return']:.3f}",
+            str(ep["episode"]),
+            str(ep["rounds"]),
+            ep["reason"],
+            f"{ep['team_return']:.3f}",
             *(f"{ep['agent_returns'][u]:.3f}" for u in sorted(summary["agent_returns"])),
         )
     console.print(t)
     tok = summary.get("tokens") or {}
     console.print(
-        f"team mean return {summary['team_return']:.3f} over {len(summary['episodes'])} episode(s); "
-        f"rounds {summary['rounds']}; messages sent {summary['messages_sent']}, dropped "
-        f"{summary['messages_dropped']}; decode errors {summary['decode_errors']}; holds {summary['holds']}; "
-        f"deadline misses {summary['deadline_misses']}; wall {summary['wall_s']:.2f} s"
+        f"team mean return {s['team_return']:.3f} over {len(s['episodes'])} episode(s); "
+        f"rounds {s['rounds']}; messages sent {s['messages_sent']}, "
+        f"dropped {s['messages_dropped']}; decode errors {s['decode_errors']}; "
+        f"holds {s['holds']}; deadline misses {s['deadline_misses']}; wall {s['wall_s']:.2f} s"
     )
-    if summary.get("model"):
+    if s.get("model"):
         console.print(
-            f"model {summary['model']}; probe: {summary['probe']}; LLM calls {summary['llm_calls']}; "
-            f"tokens {tok.get('total', 0)} (prompt {tok.get('prompt', 0)}, completion {tok.get('completion', 0)})"
+            f"model {s['model']}; probe: {s['probe']}; LLM calls {s['llm_calls']}; "
+            f"tokens {tok.get('total', 0)} (prompt {tok.get('prompt', 0)}, "
+            f"completion {tok.get('completion', 0)})"
         )
     if summary.get("lost_uavs"):
-        lost = ", ".join(f"{u} (episode {w[0]}, round {w[1] + 1})" for u, w in summary["lost_uavs"].items())
+        lost = ", ".join(
+            f"{u} (episode {w[0]}, round {w[1] + 1})" for u, w in summary["lost_uavs"].items()
+        )
         console.print(f"[bold red]lost daemons[/]: {lost}; the world held them from then on")
     if summary.get("note"):
         console.print(f"[yellow]note[/]: {summary['note']}")

@@ -36,7 +36,9 @@ ZERO: Vec3 = (0.0, 0.0, 0.0)
 class SimLink:
     """One UAV's link to the simulated world. Serves four ports from one subscription set."""
 
-    def __init__(self, mesh: Mesh, keys: Keys, uav: str, headers: HeaderFactory, reward_wait_s: float = 2.0) -> None:
+    def __init__(
+        self, mesh: Mesh, keys: Keys, uav: str, headers: HeaderFactory, reward_wait_s: float = 2.0
+    ) -> None:
         self._mesh = mesh
         self._keys = keys
         self.uav = uav
@@ -81,7 +83,9 @@ class SimLink:
                 continue
             async with self._reward_cond:
                 self._reward_seen.add((msg.episode, msg.round))
-                self._rewards.append(RewardEvent(msg.episode, msg.round, msg.reward, msg.done, "sim"))
+                self._rewards.append(
+                    RewardEvent(msg.episode, msg.round, msg.reward, msg.done, "sim")
+                )
                 self._reward_cond.notify_all()
 
     async def _pump_episodes(self, sub: object) -> None:
@@ -112,8 +116,13 @@ class SimLink:
         self._mesh.put(
             self._keys.sim_command(self.uav),
             SimCommand(
-                h=self._headers.next(), uav=self.uav, episode=tick.episode, round=tick.round,
-                vel=self._setpoint, held=self._held, sent=list(sent),
+                h=self._headers.next(),
+                uav=self.uav,
+                episode=tick.episode,
+                round=tick.round,
+                vel=self._setpoint,
+                held=self._held,
+                sent=list(sent),
             ),
             block=True,
         )
