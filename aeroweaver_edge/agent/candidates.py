@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import string
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -14,6 +15,7 @@ from aeroweaver_edge.skill_api import SkillContext, SkillParams
 if TYPE_CHECKING:
     from aeroweaver_edge.skills import SkillRegistry
 
+log = logging.getLogger(__name__)
 LABELS = tuple(string.ascii_uppercase)
 
 
@@ -43,7 +45,12 @@ def build_candidates(
         if name not in registry:
             continue
         skill = registry.get(name)
-        for params in skill.options(obs, ctx):
+        try:
+            options = skill.options(obs, ctx)
+        except Exception:  # a broken skill loses its options, not the round
+            log.exception("%s: options() of %s failed; skipping it this round", ctx.uav, name)
+            continue
+        for params in options:
             text = params.invocation(name)
             if text not in seen:
                 seen.add(text)

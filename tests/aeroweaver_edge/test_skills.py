@@ -18,7 +18,16 @@ from aeroweaver_edge.skills import (
     load_skills,
 )
 
-SHIPPED = {"cover_landmark", "explore_local", "return_in_bounds", "hold_position"}
+SHIPPED = {
+    # the paper's 22-skill task catalogue
+    "cover_landmark", "explore_local", "return_in_bounds", "hold_position", "pursue_target",
+    "follow_peer", "evade_peer", "signal_goal", "follow_signal", "encode_message",
+    "decode_message", "guess_message", "take_formation_slot", "signal_target", "seek_food",
+    "seek_cover", "collect_treasure", "deliver_treasure", "meet_collector", "approach_goal",
+    "approach_decoy", "infer_goal",
+    # flight skills
+    "take_off", "go_to", "orbit", "land", "return_home",
+}  # fmt: skip
 
 GOOD_MD = """\
 ---

@@ -1,0 +1,39 @@
+"""collect_treasure: an empty collector flies to a visible treasure to pick it up.
+
+Treasures are entities of kind ``"treasure"`` whose ``role`` is their colour (type). The
+simulator performs the pickup (within 3 m) and reports the load in ``obs.memo["cargo"]``
+(the colour, or empty); this executor never claims a pickup itself.
+"""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from aeroweaver_edge.actions import HOLD, Intent
+from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from skills._common import allowed, move_and_announce, of_kind, visible
+
+NAME = "collect_treasure"
+ROLES = frozenset({"collector"})
+
+
+class Params(SkillParams):
+    target_id: str = Field(min_length=1, description="id of a visible treasure")
+
+
+def _empty(obs: Observation) -> bool:
+    return not obs.memo.get("cargo")
+
+
+def options(obs: Observation, ctx: SkillContext) -> list[Params]:
+    if not allowed(ctx, ROLES) or not _empty(obs):
+        return []
+    return [Params(target_id=e.id) for e in of_kind(obs, "treasure")]
+
+
+def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
+    treasure = visible(obs, params.target_id, "treasure")
+    if treasure is None or not _empty(obs) or not allowed(ctx, ROLES):
+        return HOLD
+    north, east = treasure.pos[0], treasure.pos[1]
+    return move_and_announce(NAME, treasure.id, north, east, ctx, colour=treasure.role, cargo="")

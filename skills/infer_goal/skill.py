@@ -1,0 +1,29 @@
+"""infer_goal: the adversary flies to the visible landmark it believes is the goal."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from aeroweaver_edge.actions import HOLD, Intent
+from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from skills._common import allowed, move_and_announce, of_kind, visible
+
+NAME = "infer_goal"
+ROLES = frozenset({"adversary"})
+
+
+class Params(SkillParams):
+    target_id: str = Field(min_length=1, description="id of a visible candidate landmark")
+
+
+def options(obs: Observation, ctx: SkillContext) -> list[Params]:
+    if not allowed(ctx, ROLES):
+        return []
+    return [Params(target_id=e.id) for e in of_kind(obs, "landmark")]
+
+
+def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
+    landmark = visible(obs, params.target_id, "landmark")
+    if landmark is None or not allowed(ctx, ROLES):
+        return HOLD
+    return move_and_announce(NAME, landmark.id, landmark.pos[0], landmark.pos[1], ctx)

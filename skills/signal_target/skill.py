@@ -1,0 +1,43 @@
+"""signal_target: the leader hovers and reports a visible forager/evader to its team."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from aeroweaver_edge.actions import HOLD, Hold, Intent, Outgoing
+from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from skills._common import allowed, of_kind, visible
+
+NAME = "signal_target"
+ROLES = frozenset({"leader"})
+TARGET_ROLES = frozenset({"evader", "forager"})
+
+
+class Params(SkillParams):
+    target_id: str = Field(min_length=1, description="id of a visible forager or evader")
+
+
+def options(obs: Observation, ctx: SkillContext) -> list[Params]:
+    if not allowed(ctx, ROLES):
+        return []
+    return [Params(target_id=e.id) for e in of_kind(obs, "uav", TARGET_ROLES)]
+
+
+def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
+    """Zero velocity and a ``target`` message with the target's position and velocity."""
+    target = visible(obs, params.target_id, "uav", TARGET_ROLES)
+    if target is None or not allowed(ctx, ROLES):
+        return HOLD
+    report = Outgoing(
+        to="*",
+        kind="target",
+        body={
+            "skill": NAME,
+            "target_id": target.id,
+            "north": target.pos[0],
+            "east": target.pos[1],
+            "vn": target.vel[0],
+            "ve": target.vel[1],
+        },
+    )
+    return Intent(Hold(), messages=(report,))

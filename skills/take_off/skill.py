@@ -1,0 +1,32 @@
+"""take_off: climb from the ground to the flight altitude.
+
+A vehicle action the Intent type cannot express yet: the executor returns Hold and the daemon
+is expected to map this skill to ``Vehicle.takeoff(altitude_m)`` (see skill.md).
+"""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from aeroweaver_edge.actions import HOLD, Intent
+from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+
+NAME = "take_off"
+
+
+class Params(SkillParams):
+    altitude_m: float | None = Field(
+        default=None,
+        ge=2.0,
+        le=60.0,
+        description="climb to this height in m (default: mission level)",
+    )
+
+
+def options(obs: Observation, ctx: SkillContext) -> list[Params]:
+    """Offered only on the ground."""
+    return [] if obs.own.in_air else [Params()]
+
+
+def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
+    return HOLD
