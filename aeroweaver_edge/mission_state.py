@@ -34,7 +34,7 @@ class MissionState:
     def view(self) -> MissionView | None:
         """The current view, or ``None`` until both context and a matching assignment exist."""
         c, a = self.context, self.assignment
-        if c is None or a is None or a.mission_id != c.mission_id:
+        if c is None or a is None or a.mission_id != c.mission_id or c.state != "active":
             return None
         return MissionView(
             mission_id=c.mission_id,

@@ -94,6 +94,7 @@ class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):
     constraints: list[str] = []
     participants: list[str] = []
     episode: int = 0
+    state: Literal["active", "ended"] = "active"  # "ended": every participant holds
 
 
 class Assignment(msgspec.Struct, frozen=True, kw_only=True, tag="assign"):

@@ -61,6 +61,18 @@ class Commander:
                     await self.report_event.wait()
         return set(uavs) - set(self.board.ready)
 
+    def end_mission(self, reason: str = "operator stop") -> None:
+        """Publish the ended state: every daemon drops its assignment and holds."""
+        if self._context is None:
+            return
+        c = self._context
+        self._context = MissionContext(
+            h=self.headers.next(), mission_id=c.mission_id, task=c.task, text=c.text,
+            constraints=[*c.constraints, f"ended: {reason}"], participants=c.participants,
+            episode=c.episode, state="ended",
+        )  # fmt: skip
+        self.mesh.put(self.keys.context, self._context, block=True)
+
     def publish(self, plan: MissionPlan, episode: int = 0) -> None:
         """Publish (or republish after a change) the context and every assignment."""
         self.plan = plan
