@@ -9,10 +9,12 @@ import os
 import signal
 import sys
 from collections.abc import Coroutine, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
 from aeroweaver_edge.config import ConfigError, LLMConfig, UavConfig, load_config
+from commander.mission_parser import MissionParseError
 
 T = TypeVar("T")
 
@@ -48,9 +50,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from aeroweaver_edge.sim.swarm import SwarmOptions, run_swarm, write_json
     from aeroweaver_edge.sim.view import LiveView, print_summary
 
+    task, uavs = args.task, args.uavs or 3
+    if args.mission:
+        task, uavs = _sim_shape(args.mission, args.uavs)
     opts = SwarmOptions(
-        task=args.task,
-        uavs=args.uavs,
+        task=task,
+        uavs=uavs,
+        mission_text=args.mission,
         seed=args.seed,
         episodes=args.episodes,
         max_rounds=args.rounds,
@@ -71,6 +77,21 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sim_shape(text: str, uavs: int | None) -> tuple[str, int]:
+    """Task and team size a mission asks for, so the simulator can spawn that swarm; the
+    Commander then parses the mission again, properly, against the live roster."""
+    from aeroweaver_edge.sim.tasks import TASKS
+    from commander.mission_parser import parse_fallback
+
+    record = parse_fallback(text, [f"uav{i}" for i in range(uavs or 10)])
+    if record.task not in TASKS:
+        raise SystemExit(
+            f"aeroweaver: the mission reads as a {record.task} mission; the simulator runs only "
+            f"{', '.join(sorted(TASKS))} so far"
+        )
+    return record.task, uavs or len(record.uavs)
+
+
 def cmd_daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.app import run_daemon
 
@@ -83,6 +104,44 @@ def cmd_daemon(args: argparse.Namespace) -> int:
         stats.holds,
         stats.messages_sent,
     )
+    return 0
+
+
+def cmd_mission(args: argparse.Namespace) -> int:
+    import json
+
+    from aeroweaver_edge.config import MeshConfig
+    from aeroweaver_edge.sim.view import LiveView, print_mission
+    from commander.mission_start import MissionStartOptions, start_mission
+
+    mesh = MeshConfig(
+        listen=args.listen or ["tcp/127.0.0.1:0"], connect=args.connect or [],
+        namespace=args.namespace,
+    )  # fmt: skip
+    llm = None if args.no_llm else _llm_from_args(args)
+    opts = MissionStartOptions(
+        text=args.text, swarm=args.swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
+        sim_world=args.sim_world, seed=args.seed, episodes=args.episodes,
+        max_rounds=args.rounds,
+    )  # fmt: skip
+
+    async def go() -> dict[str, Any]:
+        if llm is not None and llm.base_url is None:
+            from aeroweaver_edge.llm.embedded import EmbeddedServer
+
+            async with EmbeddedServer() as server:
+                local = llm.model_copy(update={"base_url": server.base_url, "model": server.model})
+                return await start_mission(replace(opts, llm=local), LiveView().on_round)
+        return await start_mission(opts, LiveView().on_round)
+
+    out = _run(go())
+    from rich.console import Console
+
+    print_mission(out["mission"], Console())
+    print(f"mission ended: {out['ended']}; wall {out['wall_s']:.1f} s")
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=2, default=str) + "\n", encoding="utf-8")
+        print(f"mission record written to {args.json}")
     return 0
 
 
@@ -121,7 +180,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("sim", help="fly a simulated swarm mission (world + daemons + Commander)")
     s.add_argument("task", nargs="?", default="coverage")
-    s.add_argument("--uavs", type=int, default=3)
+    s.add_argument("--mission", help='natural-language mission, e.g. "Cover the three landmarks"')
+    s.add_argument(
+        "--uavs", type=int, default=None, help="swarm size (default 3, or the mission's)"
+    )
     s.add_argument("--seed", type=int, default=1)
     s.add_argument("--episodes", type=int, default=1)
     s.add_argument("--rounds", type=int, default=24, help="horizon in rounds")
@@ -140,6 +202,24 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("daemon", help="run one UAV daemon")
     d.add_argument("--config", required=True, help="uav.toml (or .json)")
     d.set_defaults(func=cmd_daemon)
+
+    m = sub.add_parser("mission", help="plan and run a mission on the daemons that are up")
+    msub = m.add_subparsers(dest="mission_command", required=True)
+    ms = msub.add_parser("start", help="parse, assign, publish and watch a mission")
+    ms.add_argument("text", help="the mission in natural language")
+    ms.add_argument("--swarm", default="default")
+    ms.add_argument("--connect", action="append", help="zenoh endpoint of a daemon or router")
+    ms.add_argument("--listen", action="append", help="zenoh endpoint to listen on")
+    ms.add_argument("--namespace", help="zenoh namespace of the swarm")
+    ms.add_argument("--roster-wait", type=float, default=3.0, help="seconds to discover daemons")
+    ms.add_argument("--sim-world", action="store_true", help="also run the kinematic world")
+    ms.add_argument("--seed", type=int, default=1)
+    ms.add_argument("--episodes", type=int, default=1)
+    ms.add_argument("--rounds", type=int, default=24)
+    ms.add_argument("--no-llm", action="store_true", help="rule-based parsing and roles only")
+    ms.add_argument("--json", metavar="PATH", help="write task record, assignments, outcome")
+    _add_llm_flags(ms)
+    ms.set_defaults(func=cmd_mission)
 
     pr = sub.add_parser("probe", help="classify an endpoint's logprob support")
     _add_llm_flags(pr)
@@ -163,6 +243,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except ConfigError as exc:
         print(f"aeroweaver: config error: {exc}", file=sys.stderr)
+        return 2
+    except MissionParseError as exc:
+        print(f"aeroweaver: cannot understand the mission: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

@@ -82,6 +82,7 @@ class RunSummary:
     setup_tokens: int = 0
     llm_calls: int = 0
     note: str = ""
+    mission: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -107,6 +108,7 @@ class RunSummary:
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
             "setup_tokens": self.setup_tokens,
+            "mission": self.mission,
             "llm_calls": self.llm_calls,
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
@@ -321,16 +323,24 @@ async def run_swarm(
         stack.push_async_callback(daemons.stop)
         await daemons.start()
 
-        plan = (
-            await plan_factory(uavs)
-            if plan_factory
-            else template_plan(opts.task, uavs, f"{opts.task}-s{opts.seed}", opts.mission_text)
-        )
+        wait_s = 60.0 if opts.processes else 30.0
+        missing = await runner.wait_alive(uavs, wait_s)
+        if missing:
+            raise RuntimeError(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
+        roster = sorted(runner.alive)
+        if plan_factory is not None:
+            plan = await plan_factory(roster)
+        elif opts.mission_text is not None:
+            plan = await _plan_from_text(opts.mission_text, roster, llm if opts.selector == "llm" else None)
+        else:
+            plan = template_plan(opts.task, uavs, f"{opts.task}-s{opts.seed}")
+        if plan.task != opts.task:
+            raise ValueError(f"the mission is a {plan.task} mission but the world runs {opts.task}")
         summary.setup_tokens = plan.setup_tokens
+        summary.mission = mission_dict(plan)
         commander.publish(plan)
         board_ref["board"] = commander.board
-        wait_s = 60.0 if opts.processes else 30.0
-        missing = await runner.wait_alive(uavs, wait_s) | await commander.wait_ready(uavs, wait_s)
+        missing = await commander.wait_ready(plan.participants, wait_s)
         if missing:
             raise RuntimeError(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
 
@@ -361,6 +371,37 @@ async def run_swarm(
         summary.llm_calls = sum(p.llm_calls for p in board.uavs.values())
     summary.wall_s = time.monotonic() - started
     return summary
+
+
+async def _plan_from_text(text: str, roster: list[str], llm: LLMConfig | None) -> MissionPlan:
+    """The Commander's harness on the live roster; setup tokens are counted once, here."""
+    from commander.harness import plan_mission
+
+    registry = load_skills()
+    if llm is None:
+        return await plan_mission(text, roster, registry, None)
+    from aeroweaver_edge.llm.client import ChatClient
+
+    async with ChatClient.from_config(llm) as client:
+        return await plan_mission(text, roster, registry, client)
+
+
+def mission_dict(plan: MissionPlan) -> dict[str, Any]:
+    return {
+        "mission_id": plan.mission_id,
+        "text": plan.text,
+        "task": plan.task,
+        "record": plan.record.model_dump(mode="json") if plan.record is not None else None,
+        "parse_source": plan.parse_source,
+        "roles_source": plan.roles_source,
+        "catalogue": list(plan.catalogue),
+        "assignments": {
+            u: {"role": a.role, "local_goal": a.local_goal, "skills": list(a.skills)}
+            for u, a in sorted(plan.assignments.items())
+        },
+        "setup_tokens": plan.setup_tokens,
+        "notes": list(plan.notes),
+    }
 
 
 def write_json(summary: RunSummary, path: Path) -> None:

@@ -40,8 +40,25 @@ class LiveView:
         )
 
 
+def print_mission(mission: dict[str, Any], console: Console) -> None:
+    t = Table(title=f"mission {mission['mission_id']}: {mission['task']}")
+    for col in ("uav", "role", "local goal", "active skills"):
+        t.add_column(col)
+    for uav, a in mission["assignments"].items():
+        t.add_row(uav, a["role"], a["local_goal"], ", ".join(a["skills"]))
+    console.print(t)
+    console.print(
+        f"parsed by {mission['parse_source']}, roles by {mission['roles_source']}; "
+        f"setup tokens {mission['setup_tokens']} (counted once, apart from decision tokens)"
+    )
+    for note in mission.get("notes") or []:
+        console.print(f"  · {note}")
+
+
 def print_summary(summary: dict[str, Any], console: Console | None = None) -> None:
     console = console or Console()
+    if summary.get("mission"):
+        print_mission(summary["mission"], console)
     s = summary
     t = Table(title=f"{s['task']} · seed {s['seed']} · {s['mode']} · {s['selector']}")
     t.add_column("episode")
