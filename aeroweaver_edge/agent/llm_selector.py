@@ -1,0 +1,128 @@
+"""The LLM selector: one chat completion per decision, first-token logprobs per label.
+
+It never raises into the round loop: any client failure becomes
+``LabelScores(logprobs={}, error=...)`` and ``scoring.choose`` turns that into a hold.
+How logprobs are used follows the endpoint probe (``llm.probe``):
+
+* ``ok`` — logprobs drive the choice and the experience correction;
+* ``rejected`` — requests go out *without* logprob parameters (they would be refused every
+  round) and the generated text label is used; correction off;
+* ``degenerate`` / ``low_label_mass`` — logprobs are still requested (harmless, useful for
+  diagnostics) but the generated text label decides; correction off;
+* ``unreachable`` or no probe — unknown: the first real answer (or a 400 refusal) decides
+  the class, so an endpoint that was down at start-up is not stuck without correction.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from typing import Any
+
+from aeroweaver_edge.agent.prompt import PromptLimits, build_messages
+from aeroweaver_edge.agent.scoring import LabelScores
+from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
+from aeroweaver_edge.llm.logprobs import parse_label_scores
+from aeroweaver_edge.llm.probe import ProbeResult, classify_error, classify_response
+from aeroweaver_edge.ports import DecisionRequest
+
+log = logging.getLogger(__name__)
+
+LIVE_MIN_LABEL_MASS = 0.05
+"""Label-mass floor when the class is decided from a live decision instead of the probe
+prompt. Lower than the probe's: one real prompt varies more (SmolLM2 put 0.27 on labels
+for one decision prompt and 0.74 on the probe), while a base model stays near 0.01."""
+
+
+class LLMSelector:
+    """``Selector`` backed by an OpenAI-compatible endpoint."""
+
+    def __init__(
+        self,
+        client: ChatClient,
+        cfg: LLMConfig,
+        probe_result: ProbeResult | None = None,
+        *,
+        owns_client: bool = True,
+        limits: PromptLimits | None = None,
+        agent: str | None = None,
+    ) -> None:
+        self.client = client
+        self.cfg = cfg
+        self.probe = probe_result
+        self.name = f"llm:{cfg.model}"
+        self._owns_client = owns_client
+        self._limits = limits
+        self.agent = agent  # ledger name; default: the observing UAV's id
+        if probe_result is not None and not probe_result.ok:
+            log.warning("%s", probe_result.line())  # says: correction off, text label
+
+    @property
+    def settled(self) -> bool:
+        """Whether the endpoint's logprob class is known (probe answered)."""
+        return self.probe is not None and self.probe.kind != "unreachable"
+
+    @property
+    def correction_on(self) -> bool:
+        return not self.settled or (self.probe is not None and self.probe.correction_on)
+
+    def _params(self) -> dict[str, Any]:
+        params: dict[str, Any] = {"max_tokens": 1, "temperature": self.cfg.temperature}
+        if not (self.probe is not None and self.probe.kind == "rejected"):
+            params.update(logprobs=True, top_logprobs=self.cfg.top_logprobs)
+        return params
+
+    def _settle(self, probe: ProbeResult) -> None:
+        self.probe = probe
+        level = logging.INFO if probe.ok else logging.WARNING
+        log.log(level, "%s (decided from a live decision)", probe.line())
+
+    async def score(self, request: DecisionRequest) -> LabelScores:
+        labels = [c.label for c in request.candidates]
+        if not labels:
+            return LabelScores(logprobs={}, error="no candidates to choose from")
+        obs = request.observation
+        tag = CallTag(self.agent or obs.uav, request.role, obs.episode, obs.round, "decide")
+        params = self._params()
+        try:
+            result = await self.client.chat(
+                build_messages(request, limits=self._limits), tag=tag, **params
+            )
+        except LLMError as exc:
+            if not self.settled and isinstance(exc, LLMHTTPError) and exc.status in (400, 422):
+                self._settle(classify_error(exc, model=self.client.model))
+            return LabelScores(
+                logprobs={}, error=str(exc), extra={"error_kind": type(exc).__name__}
+            )
+        except Exception as exc:  # never into the round loop
+            log.exception("LLM selector failed unexpectedly")
+            return LabelScores(logprobs={}, error=f"unexpected {type(exc).__name__}: {exc}")
+        try:
+            if not self.settled and "logprobs" in params:
+                self._settle(
+                    classify_response(
+                        result.raw,
+                        labels,
+                        LIVE_MIN_LABEL_MASS,
+                        endpoint=self.client.endpoint,
+                        model=self.client.model,
+                    )
+                )
+            scores = parse_label_scores(
+                result.raw,
+                labels,
+                self.cfg.top_logprobs,
+                usage=result.usage,
+                latency_s=result.latency_s,
+                use_logprobs=self.correction_on and "logprobs" in params,
+            )
+        except Exception as exc:  # a parser bug must not stop the UAV either
+            log.exception("could not parse the LLM answer")
+            return LabelScores(logprobs={}, error=f"unparseable answer: {type(exc).__name__}")
+        kind = self.probe.kind if self.probe is not None else "unprobed"
+        return replace(scores, extra={**scores.extra, "probe": kind})
+
+    async def aclose(self) -> None:
+        if self._owns_client:
+            await self.client.aclose()

