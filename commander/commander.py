@@ -13,11 +13,13 @@ import functools
 from typing import TYPE_CHECKING
 
 from aeroweaver_edge.wire import Assignment, HeaderFactory, Keys, MissionContext, ProgressReport
-from commander.plan import MissionPlan
+from commander.plan import MissionPlan, UavAssignment
 from commander.progress import ProgressBoard
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.mesh import Mesh, Subscription
+
+HOLD = "hold_position"
 
 
 class Commander:
@@ -35,8 +37,11 @@ class Commander:
         self.report_event = asyncio.Event()
 
     async def start(self) -> None:
+        # Declare everything before the liveliness token: a peer that sees the token may
+        # report at once, and that report must find our subscriber.
+        reports = self.mesh.subscribe(self.keys.report("*"), ProgressReport)
         self.mesh.declare_queryable(self.keys.context, lambda: self._context)
-        self._tasks.append(asyncio.create_task(self._pump_reports(), name="cmdr-reports"))
+        self._tasks.append(asyncio.create_task(self._pump_reports(reports), name="cmdr-reports"))
         self.mesh.declare_token(self.keys.alive_cmdr)
 
     async def aclose(self) -> None:
@@ -47,8 +52,8 @@ class Commander:
                 await t
         self._tasks.clear()
 
-    async def _pump_reports(self) -> None:
-        async for _key, rep in self.mesh.subscribe(self.keys.report("*"), ProgressReport):
+    async def _pump_reports(self, reports: Subscription[ProgressReport]) -> None:
+        async for _key, rep in reports:
             self.board.add(rep)
             self.report_event.set()
 
@@ -89,7 +94,13 @@ class Commander:
             episode=episode,
         )
         self.mesh.put(self.keys.context, self._context, block=True)
-        for uav, a in sorted(plan.assignments.items()):
+        # A UAV left out of this plan is told to hold, and catches up on that, not on its
+        # old assignment.
+        released = {
+            u: UavAssignment("unassigned", "Hold position: not part of this mission.", (HOLD,))
+            for u in set(self._assignments) - set(plan.assignments)
+        }
+        for uav, a in sorted({**released, **plan.assignments}.items()):
             key = self.keys.assign(uav)
             msg = Assignment(
                 h=self.headers.next(),

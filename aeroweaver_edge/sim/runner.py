@@ -102,6 +102,9 @@ class WorldRunner:
             if last_chunk(key) != cmd.uav or cmd.h.sender != cmd.uav:
                 self.stats.rejected_commands += 1  # a UAV may only command its own body
                 continue
+            if (cmd.episode, cmd.round) != self._where:
+                self.stats.rejected_commands += 1  # late, early or foreign: never buffered
+                continue
             self._commands[(cmd.episode, cmd.round)].setdefault(cmd.uav, cmd)
             self._changed.set()
 
