@@ -70,8 +70,10 @@ def build_zenoh_config(cfg: MeshConfig) -> zenoh.Config:
         ("mode", cfg.mode),
         ("listen/endpoints", cfg.listen),
         ("connect/endpoints", cfg.connect),
-        ("connect/retry", {"period_init_ms": 100, "period_max_ms": 1000,
-                           "period_increase_factor": 2}),
+        (
+            "connect/retry",
+            {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2},
+        ),
         ("scouting/multicast/enabled", cfg.multicast),
         ("scouting/gossip/enabled", cfg.gossip),
         ("scouting/delay", 100),
@@ -236,9 +238,7 @@ class LivelinessWatch(Stream[LivelinessEvent]):
 class Queryable(Declared):
     """Answers queries on one concrete key with the provider's latest value."""
 
-    def __init__(
-        self, mesh: Mesh, key: str, provider: Callable[[], msgspec.Struct | None]
-    ) -> None:
+    def __init__(self, mesh: Mesh, key: str, provider: Callable[[], msgspec.Struct | None]) -> None:
         super().__init__(mesh, key)
         self._provider = provider
         self.answered = 0

@@ -136,8 +136,13 @@ class PeerLink:
     ) -> StateBeacon:
         """Publish our state (DROP: latest wins) and remember it for the radius rule."""
         beacon = StateBeacon(
-            h=self._headers.next(), uav=self.uav, round=round, pos=pos, vel=vel,
-            role=role, status=status,
+            h=self._headers.next(),
+            uav=self.uav,
+            round=round,
+            pos=pos,
+            vel=vel,
+            role=role,
+            status=status,
         )
         self._own = beacon
         self._mesh.put(self._keys.state(self.uav), beacon)
@@ -164,7 +169,11 @@ class PeerLink:
         reason = self._unreachable(to, min_round)
         if reason is None and self._own is not None:  # (_unreachable checked _own; for mypy)
             msg = InboxMessage(
-                h=self._headers.next(), to=to, round=round, kind=kind, body=dict(body),
+                h=self._headers.next(),
+                to=to,
+                round=round,
+                kind=kind,
+                body=dict(body),
                 sender_pos=self._own.pos,
             )
             try:

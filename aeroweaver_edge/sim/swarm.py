@@ -331,7 +331,8 @@ async def run_swarm(
         if plan_factory is not None:
             plan = await plan_factory(roster)
         elif opts.mission_text is not None:
-            plan = await _plan_from_text(opts.mission_text, roster, llm if opts.selector == "llm" else None)
+            planner_llm = llm if opts.selector == "llm" else None
+            plan = await _plan_from_text(opts.mission_text, roster, planner_llm)
         else:
             plan = template_plan(opts.task, uavs, f"{opts.task}-s{opts.seed}")
         if plan.task != opts.task:

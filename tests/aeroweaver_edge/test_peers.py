@@ -37,12 +37,14 @@ async def swarm(net: ZenohNet, *uavs: str) -> dict[str, PeerLink]:
 
 async def beacons_seen(links: dict[str, PeerLink], round_: int) -> None:
     """Wait until every link holds every peer's beacon of ``round_``."""
+
     def done() -> bool:
         return all(
             all(b.round >= round_ for b in link.neighbours.values())
             and len(link.neighbours) == len(link.roster)
             for link in links.values()
         )
+
     assert await eventually(done)
 
 
@@ -82,7 +84,10 @@ async def test_radius_rule_and_missing_beacons(zenoh_net: ZenohNet) -> None:
     assert await a.send("ghost", "status", {}, round=1) is None  # not in the roster
     assert await a.send("near", "status", {}, round=2, min_round=2, wait_s=0.05) is None
     assert a.stats.dropped == {
-        "out_of_range": 1, "no_beacon": 1, "unknown_peer": 1, "stale_beacon": 1,
+        "out_of_range": 1,
+        "no_beacon": 1,
+        "unknown_peer": 1,
+        "stale_beacon": 1,
     }
     assert a.stats.sent == 1
 
@@ -109,9 +114,16 @@ async def test_spoofed_and_misaddressed_messages_are_rejected(zenoh_net: ZenohNe
     mallory = zenoh_net.meshes[0]  # a's session, misbehaving
     mallory.put(KEYS.inbox("b", "a"), message("c", "b", 1))  # header says c, key says a
     mallory.put(KEYS.inbox("b", "a"), message("a", "x", 2))  # not for b
-    mallory.put(KEYS.state("a"), StateBeacon(
-        h=HeaderFactory("a").next(), uav="z", round=1, pos=STILL, vel=STILL,
-    ))  # beacon for z on a's key
+    mallory.put(
+        KEYS.state("a"),
+        StateBeacon(
+            h=HeaderFactory("a").next(),
+            uav="z",
+            round=1,
+            pos=STILL,
+            vel=STILL,
+        ),
+    )  # beacon for z on a's key
     assert await eventually(lambda: b.stats.rejected.total() == 3)
     assert b.stats.rejected == {"spoofed_sender": 1, "wrong_recipient": 1, "spoofed_beacon": 1}
     assert await b.collect_inbox(timeout_s=0.0) == []

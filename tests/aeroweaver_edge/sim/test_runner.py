@@ -1,0 +1,173 @@
+"""WorldRunner over real zenoh sessions, with hand-driven stand-in daemons.
+
+Each stand-in is a real session that holds a liveliness token and answers the world's
+perceptions by publishing SimCommands itself, so a test can play a silent, slow or
+spoofing UAV exactly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import pytest
+
+from aeroweaver_edge.config import SimConfig
+from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.sim.episode import EpisodeResult
+from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
+from aeroweaver_edge.sim.tasks import make_task
+from aeroweaver_edge.wire import HeaderFactory, Keys, SimCommand, SimPerception, Vec3
+from tests.helpers.zenoh_net import ZenohNet
+
+SWARM = "rt"
+KEYS = Keys(SWARM)
+DEADLINE_S = 1.0  # generous: a loaded CI machine must not turn answers into misses
+
+Policy = Callable[[SimPerception, HeaderFactory], list[tuple[str, SimCommand]]]
+"""Given a perception, the (key, command) pairs the stand-in publishes in reply."""
+
+
+@dataclass
+class StandIn:
+    uav: str
+    mesh: Mesh
+    seen: list[SimPerception] = field(default_factory=list)
+
+    def pos(self, round_: int) -> Vec3:
+        return next(p.pos for p in self.seen if p.round == round_)
+
+    def vel(self, round_: int) -> Vec3:
+        return next(p.vel for p in self.seen if p.round == round_)
+
+
+def command(
+    hf: HeaderFactory,
+    p: SimPerception,
+    *,
+    uav: str | None = None,
+    vel: Vec3 = (0.0, 0.0, 0.0),
+    held: bool = False,
+) -> SimCommand:
+    return SimCommand(
+        h=hf.next(), uav=uav or p.uav, episode=p.episode, round=p.round, vel=vel, held=held
+    )
+
+
+def silent(p: SimPerception, hf: HeaderFactory) -> list[tuple[str, SimCommand]]:
+    return []
+
+
+def holding(p: SimPerception, hf: HeaderFactory) -> list[tuple[str, SimCommand]]:
+    return [(KEYS.sim_command(p.uav), command(hf, p, held=True))]
+
+
+async def stand_in(net: ZenohNet, uav: str, policy: Policy) -> StandIn:
+    mesh = await net.open(uav)
+    hf = HeaderFactory(uav)
+    me = StandIn(uav, mesh)
+
+    def on_perception(item: tuple[str, SimPerception]) -> None:
+        _key, p = item
+        me.seen.append(p)
+        for key, cmd in policy(p, hf):
+            mesh.put(key, cmd, block=True)
+
+    mesh.subscribe(KEYS.sim_perception(uav), SimPerception, on_item=on_perception)
+    mesh.declare_token(KEYS.alive_uav(uav))
+    return me
+
+
+async def play(
+    net: ZenohNet, policies: dict[str, Policy], rounds: int
+) -> tuple[WorldRunner, EpisodeResult, list[RoundLog], dict[str, StandIn]]:
+    world_mesh = await net.open("world")
+    cfg = SimConfig(uavs=len(policies), max_rounds=rounds, deadline_s=DEADLINE_S)
+    logs: list[RoundLog] = []
+
+    async def on_round(log: RoundLog) -> None:
+        logs.append(log)
+
+    runner = WorldRunner(
+        world_mesh,
+        SWARM,
+        make_task("coverage", len(policies), max_rounds=rounds),
+        cfg,
+        on_round=on_round,
+    )
+    await runner.start()
+    try:
+        stand_ins = {u: await stand_in(net, u, pol) for u, pol in policies.items()}
+        assert await runner.wait_alive(list(policies), 5.0) == set()
+        result = await runner.run_episode(0)
+    finally:
+        await runner.aclose()
+    return runner, result, logs, stand_ins
+
+
+async def test_spoofed_commands_are_rejected_and_counted(zenoh_net: ZenohNet) -> None:
+    def spoofer(p: SimPerception, hf: HeaderFactory) -> list[tuple[str, SimCommand]]:
+        push: Vec3 = (10.0, 0.0, 0.0)
+        return [
+            # on uav0's key, naming uav0, but the header says who really sent it
+            (KEYS.sim_command("uav0"), command(hf, p, uav="uav0", vel=push)),
+            # on its own key, but claiming to command uav0's body
+            (KEYS.sim_command("uav1"), command(hf, p, uav="uav0", vel=push)),
+            # on uav0's key, commanding itself
+            (KEYS.sim_command("uav0"), command(hf, p, vel=push)),
+            # and finally its own, legitimate hold
+            (KEYS.sim_command("uav1"), command(hf, p, held=True)),
+        ]
+
+    runner, result, logs, ins = await play(zenoh_net, {"uav0": silent, "uav1": spoofer}, 2)
+
+    assert result.rounds == 2
+    assert runner.stats.rejected_commands == 3 * 2
+    assert runner.stats.commands == 2  # uav1's own holds only
+    for log in logs:
+        assert set(log.commands) == {"uav1"}
+        assert log.commands["uav1"].held
+        assert log.missed == ("uav0",)  # a spoofed command does not stand in for uav0's
+    # Neither body was pushed: both held in place.
+    assert len(ins["uav0"].seen) == len(ins["uav1"].seen) == 2
+    assert ins["uav0"].pos(1) == ins["uav0"].pos(0)
+    assert ins["uav1"].pos(1) == ins["uav1"].pos(0)
+
+
+async def test_silent_uav_holds_and_counts_as_a_deadline_miss(zenoh_net: ZenohNet) -> None:
+    def once_then_silent(p: SimPerception, hf: HeaderFactory) -> list[tuple[str, SimCommand]]:
+        if p.round > 0:
+            return []
+        return [(KEYS.sim_command(p.uav), command(hf, p, vel=(4.0, 0.0, 0.0)))]
+
+    runner, result, logs, ins = await play(
+        zenoh_net, {"uav0": once_then_silent, "uav1": holding}, 4
+    )
+    u0 = ins["uav0"]
+
+    assert result.rounds == 4
+    assert [log.missed for log in logs] == [(), ("uav0",), ("uav0",), ("uav0",)]
+    assert runner.stats.deadline_misses == 3
+    for log in logs[1:]:
+        assert log.wait_s >= DEADLINE_S - 0.05  # the world waited out the deadline
+        assert "uav1" in log.commands
+    assert logs[0].wait_s < DEADLINE_S  # everyone answered: no waiting for the deadline
+
+    # Round 0 moved it; the missed round 1 brought it to a stop; after that it stays put.
+    assert u0.pos(1)[0] > u0.pos(0)[0]
+    assert u0.vel(2) == pytest.approx((0.0, 0.0, 0.0))
+    assert u0.pos(3) == u0.pos(2)
+    assert ins["uav1"].pos(3) == ins["uav1"].pos(0)
+
+
+async def test_commands_for_another_round_do_not_count(zenoh_net: ZenohNet) -> None:
+    def late(p: SimPerception, hf: HeaderFactory) -> list[tuple[str, SimCommand]]:
+        stale = SimCommand(
+            h=hf.next(), uav=p.uav, episode=p.episode, round=p.round - 1, vel=(5.0, 0.0, 0.0)
+        )
+        return [(KEYS.sim_command(p.uav), stale)]
+
+    runner, _result, logs, ins = await play(zenoh_net, {"uav0": late}, 2)
+    assert [log.missed for log in logs] == [("uav0",), ("uav0",)]
+    assert runner.stats.deadline_misses == 2
+    assert ins["uav0"].pos(1) == ins["uav0"].pos(0)

@@ -1,0 +1,100 @@
+"""The ``aeroweaver`` command line: bad config exits 2 naming the key; help works."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from aeroweaver_edge.cli import build_parser, main
+
+
+def aeroweaver() -> list[str]:
+    """The installed console script (falls back to ``python -m``)."""
+    script = Path(sys.executable).with_name("aeroweaver")
+    if script.exists():
+        return [str(script)]
+    found = shutil.which("aeroweaver")
+    return [found] if found else [sys.executable, "-m", "aeroweaver_edge.cli"]
+
+
+def run(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [*aeroweaver(), *args], capture_output=True, text=True, timeout=60, cwd=cwd, check=False
+    )
+
+
+def test_daemon_with_a_typo_in_its_config_exits_2_naming_the_key(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('uav = "uav0"\n[safety]\nmax_sped_mps = 3.0\n', encoding="utf-8")
+    proc = run("daemon", "--config", str(bad), cwd=tmp_path)
+    assert proc.returncode == 2
+    assert "config error" in proc.stderr
+    assert "safety.max_sped_mps" in proc.stderr
+    assert str(bad) in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ('uav = "UAV 0"\n', "uav"),
+        ('uav = "uav0"\n[safety]\ngeofence_north_m = [70.0, -70.0]\n', "safety.geofence_north_m"),
+        ('uav = "uav0"\n[mesh\n', "TOML"),
+        ('uav = "uav0"\n[vehicle]\nbackend = "mavlink"\n', "vehicle.backend"),
+    ],
+)
+def test_daemon_config_errors_exit_2_in_process(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str, needle: str
+) -> None:
+    path = tmp_path / "uav.toml"
+    path.write_text(text, encoding="utf-8")
+    assert main(["daemon", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("aeroweaver: config error: ")
+    assert needle in err
+
+
+def test_daemon_with_a_missing_config_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["daemon", "--config", str(tmp_path / "absent.toml")]) == 2
+    assert "absent.toml: cannot read" in capsys.readouterr().err
+
+
+def test_help_lists_every_command(tmp_path: Path) -> None:
+    proc = run("--help", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("usage: aeroweaver")
+    for command in ("sim", "daemon", "probe", "bench"):
+        assert command in proc.stdout
+
+
+@pytest.mark.parametrize(
+    ("command", "flag"),
+    [("daemon", "--config"), ("sim", "--selector"), ("probe", "--llm"), ("bench", "--records")],
+)
+def test_subcommand_help(capsys: pytest.CaptureFixture[str], command: str, flag: str) -> None:
+    with pytest.raises(SystemExit) as info:
+        main([command, "--help"])
+    assert info.value.code == 0
+    assert flag in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [[], ["daemon"], ["sim", "--selector", "oracle"], ["fly"], ["sim", "--uavs", "three"]],
+)
+def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    assert "usage: aeroweaver" in capsys.readouterr().err
+
+
+def test_sim_defaults_match_the_paper_horizon() -> None:
+    args = build_parser().parse_args(["sim"])
+    assert (args.task, args.rounds, args.selector) == ("coverage", 24, "llm")
