@@ -134,7 +134,15 @@ async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None)
     return out
 
 
-def _held(tick: RoundTick, why: str, state_text: str, started: float, **kw: object) -> RoundOutcome:
+def _held(
+    tick: RoundTick,
+    why: str,
+    state_text: str,
+    started: float,
+    scores: LabelScores | None = None,
+    n_candidates: int = 0,
+) -> RoundOutcome:
+    """A hold this UAV falls back to; not the selector's choice."""
     return RoundOutcome(
         tick.episode,
         tick.round,
@@ -147,7 +155,8 @@ def _held(tick: RoundTick, why: str, state_text: str, started: float, **kw: obje
         (0.0, 0.0, 0.0),
         state_text=state_text,
         latency_s=time.monotonic() - started,
-        **kw,  # type: ignore[arg-type]
+        scores=scores,
+        n_candidates=n_candidates,
     )
 
 

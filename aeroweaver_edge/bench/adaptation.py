@@ -19,14 +19,19 @@ import statistics
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.sim.swarm import SwarmOptions, run_swarm
 
 
 async def run_conditions(
-    betas: list[float], episodes: int, seed: int, uavs: int, selector: str, llm: LLMConfig
+    betas: list[float],
+    episodes: int,
+    seed: int,
+    uavs: int,
+    selector: Literal["llm", "scripted"],
+    llm: LLMConfig,
 ) -> dict[str, Any]:
     out: dict[str, Any] = {"seed": seed, "episodes": episodes, "uavs": uavs, "conditions": {}}
     for beta in betas:
@@ -35,7 +40,7 @@ async def run_conditions(
                 uavs=uavs,
                 seed=seed,
                 episodes=episodes,
-                selector=selector,  # type: ignore[arg-type]
+                selector=selector,
                 llm=llm,
                 beta=beta,
                 memory_dir=Path(mem),

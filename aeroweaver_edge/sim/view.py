@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from aeroweaver_edge.sim.runner import RoundLog
@@ -37,6 +38,7 @@ class LiveView:
             + " | ".join(parts)
             + f" | stable {res.stable_rounds}{status} ({log.wait_s:.2f} s)",
             soft_wrap=True,
+            markup=False,
         )
 
 
@@ -52,7 +54,7 @@ def print_mission(mission: dict[str, Any], console: Console) -> None:
         f"setup tokens {mission['setup_tokens']} (counted once, apart from decision tokens)"
     )
     for note in mission.get("notes") or []:
-        console.print(f"  · {note}")
+        console.print(f"  · {escape(note)}")
 
 
 def print_summary(summary: dict[str, Any], console: Console | None = None) -> None:
@@ -85,7 +87,7 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
     )
     if s.get("model"):
         console.print(
-            f"model {s['model']}; probe: {s['probe']}; LLM calls {s['llm_calls']}; "
+            f"model {s['model']}; probe: {escape(str(s['probe']))}; LLM calls {s['llm_calls']}; "
             f"tokens {tok.get('total', 0)} (prompt {tok.get('prompt', 0)}, "
             f"completion {tok.get('completion', 0)})"
         )
@@ -95,4 +97,4 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
         )
         console.print(f"[bold red]lost daemons[/]: {lost}; the world held them from then on")
     if summary.get("note"):
-        console.print(f"[yellow]note[/]: {summary['note']}")
+        console.print(f"[yellow]note[/]: {escape(summary['note'])}")

@@ -28,7 +28,7 @@ from aeroweaver_edge.wire import (
 )
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.mesh import Mesh, Subscription
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 
@@ -72,13 +72,13 @@ class SimLink:
                 await t
         self._tasks.clear()
 
-    async def _pump_perception(self, sub: object) -> None:
-        async for _key, msg in sub:  # type: ignore[attr-defined]
+    async def _pump_perception(self, sub: Subscription[SimPerception]) -> None:
+        async for _key, msg in sub:
             if msg.uav == self.uav:
                 await self._ticks.put(msg)
 
-    async def _pump_rewards(self, sub: object) -> None:
-        async for _key, msg in sub:  # type: ignore[attr-defined]
+    async def _pump_rewards(self, sub: Subscription[SimReward]) -> None:
+        async for _key, msg in sub:
             if msg.uav != self.uav or (msg.episode, msg.round) in self._reward_seen:
                 continue
             async with self._reward_cond:
@@ -88,8 +88,8 @@ class SimLink:
                 )
                 self._reward_cond.notify_all()
 
-    async def _pump_episodes(self, sub: object) -> None:
-        async for _key, msg in sub:  # type: ignore[attr-defined]
+    async def _pump_episodes(self, sub: Subscription[SimEpisode]) -> None:
+        async for _key, msg in sub:
             if msg.phase == "shutdown":
                 await self._ticks.put(None)
 
