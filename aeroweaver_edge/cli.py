@@ -57,6 +57,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         task=task,
         uavs=uavs,
         mission_text=args.mission,
+        top_k=args.top_k,
         seed=args.seed,
         episodes=args.episodes,
         max_rounds=args.rounds,
@@ -68,7 +69,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
         deadline_s=args.deadline,
     )
     view = None if args.quiet else LiveView()
-    summary = _run(run_swarm(opts, on_round=view.on_round if view else None))
+    try:
+        summary = _run(run_swarm(opts, on_round=view.on_round if view else None))
+    except (KeyboardInterrupt, asyncio.CancelledError):
+        print("aeroweaver: stopped by the operator; every UAV was told to hold", file=sys.stderr)
+        return 130
     data = summary.as_dict()
     print_summary(data)
     if args.json:
@@ -121,6 +126,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
     llm = None if args.no_llm else _llm_from_args(args)
     opts = MissionStartOptions(
         text=args.text, swarm=args.swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
+        top_k=args.top_k,
         sim_world=args.sim_world, seed=args.seed, episodes=args.episodes,
         max_rounds=args.rounds,
     )  # fmt: skip
@@ -192,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--beta", type=float, default=0.8, help="experience correction weight (0: plain)"
     )
+    s.add_argument("--top-k", type=int, default=8, help="task skills per UAV (with --mission)")
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
     s.add_argument("--deadline", type=float, default=30.0, help="seconds a round may take")
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
@@ -217,6 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument("--episodes", type=int, default=1)
     ms.add_argument("--rounds", type=int, default=24)
     ms.add_argument("--no-llm", action="store_true", help="rule-based parsing and roles only")
+    ms.add_argument("--top-k", type=int, default=8, help="task skills activated per UAV")
     ms.add_argument("--json", metavar="PATH", help="write task record, assignments, outcome")
     _add_llm_flags(ms)
     ms.set_defaults(func=cmd_mission)

@@ -65,7 +65,6 @@ class AgentConfig(_Section):
     selector: Literal["llm", "scripted"] = "llm"
     beta: float = Field(default=0.8, ge=0)
     gamma: float = Field(default=0.95, ge=0, le=1)
-    top_k_skills: int = Field(default=8, ge=1)
     neighbourhood: int = Field(default=32, ge=1)
     memory_path: str | None = None  # None: in-memory SQLite (lost on exit)
     share_experience: bool = True

@@ -32,7 +32,7 @@ from commander.task_record import (
     validation_summary,
 )
 
-PARSE_MAX_TOKENS = 600
+PARSE_MAX_TOKENS = 300  # a full record is ~60-150 tokens
 ParseSource = Literal["llm", "fallback"]
 
 
@@ -500,7 +500,7 @@ def _team_sizes() -> str:
 
 
 def parse_messages(text: str, roster: Sequence[str]) -> list[dict[str, str]]:
-    schema = json.dumps(TaskRecord.llm_schema(), separators=(",", ":"))
+    schema = json.dumps(TaskRecord.llm_schema(roster), separators=(",", ":"))
     system = (
         "You are the mission parser of a UAV swarm Commander. Read the operator's mission and "
         "answer with exactly one JSON object that matches the JSON Schema below, and nothing "
@@ -526,7 +526,7 @@ async def parse_with_llm(
     answer = await ask_json(
         client,
         parse_messages(text, roster),
-        TaskRecord.llm_schema(),
+        TaskRecord.llm_schema(roster),
         name="task_record",
         purpose="mission_parse",
         max_tokens=PARSE_MAX_TOKENS,

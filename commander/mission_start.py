@@ -30,6 +30,7 @@ class MissionStartOptions:
     mesh: MeshConfig = field(default_factory=MeshConfig)
     llm: LLMConfig | None = None  # None: rule-based parsing and template roles only
     roster_wait_s: float = 3.0
+    top_k: int = 8
     sim_world: bool = False
     seed: int = 1
     episodes: int = 1
@@ -66,7 +67,7 @@ async def start_mission(
                 f"no UAV daemon of swarm {opts.swarm!r} is up (waited {opts.roster_wait_s:.0f} s)"
             )
         out["roster"] = roster
-        plan = await _plan_from_text(opts.text, roster, opts.llm)
+        plan = await _plan_from_text(opts.text, roster, opts.llm, opts.top_k)
         out["mission"] = mission_dict(plan)
         commander = Commander(mesh, opts.swarm)
         await commander.start()

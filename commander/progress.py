@@ -27,6 +27,7 @@ class ProgressBoard:
     uavs: dict[str, UavProgress] = field(default_factory=dict)
     foreign: int = 0  # reports for another mission, or whose sender is not the reporting UAV
     ready: dict[str, str] = field(default_factory=dict)  # uav -> role it acknowledged
+    episode_tokens: dict[int, int] = field(default_factory=dict)  # decision tokens per episode
 
     def add(self, rep: ProgressReport) -> None:
         if rep.mission_id != self.mission_id or rep.h.sender != rep.uav:
@@ -45,3 +46,5 @@ class ProgressBoard:
         p.messages_sent += rep.messages_sent
         p.messages_dropped += rep.messages_dropped
         p.llm_calls += rep.prompt_tokens > 0
+        tokens = rep.prompt_tokens + rep.completion_tokens
+        self.episode_tokens[rep.episode] = self.episode_tokens.get(rep.episode, 0) + tokens

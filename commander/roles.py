@@ -14,7 +14,7 @@ import json
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, ValidationError
 
@@ -23,7 +23,7 @@ from aeroweaver_edge.skills import SkillDocument
 from commander.mission_parser import JsonAnswer, ask_json
 from commander.task_record import TASKS, TaskRecord, validation_summary
 
-ROLES_MAX_TOKENS = 1200
+ROLES_MAX_TOKENS = 1200  # cap; the per-call budget scales with the team (see _roles_budget)
 RoleSource = Literal["llm", "template"]
 
 
@@ -53,6 +53,23 @@ class RolePlan(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     assignments: list[_Choice] = Field(min_length=1)
+
+
+def role_schema(record: TaskRecord) -> dict[str, Any]:
+    """``RolePlan``'s schema narrowed to this record: UAV ids and role names are enums and
+    the list has one entry per UAV, so a grammar-constrained server cannot invent them."""
+    schema = RolePlan.model_json_schema()
+    choice = schema["$defs"]["_Choice"]["properties"]
+    choice["uav"] = {"enum": sorted(record.uavs)}
+    choice["role"] = {"enum": list(TASKS[record.task].role_names)}
+    choice["local_goal"]["maxLength"] = 160
+    items = schema["properties"]["assignments"]
+    items["minItems"] = items["maxItems"] = len(record.uavs)
+    return schema
+
+
+def _roles_budget(record: TaskRecord) -> int:
+    return min(ROLES_MAX_TOKENS, 60 + 70 * len(record.uavs))
 
 
 def _region_goal(record: TaskRecord) -> str:
@@ -124,7 +141,7 @@ def role_messages(record: TaskRecord, catalogue: Sequence[SkillDocument]) -> lis
         for r in spec.roles
     )
     skills = "\n".join(f"- {d.name}: {' '.join(d.description.split())}" for d in catalogue)
-    schema = json.dumps(RolePlan.model_json_schema(), separators=(",", ":"))
+    schema = json.dumps(role_schema(record), separators=(",", ":"))
     system = (
         "You are the Commander of a UAV swarm. Give every participating UAV exactly one role "
         "of this task and a one-sentence local goal for it. Answer with exactly one JSON "
@@ -165,10 +182,10 @@ async def assign_roles(
     answer: JsonAnswer = await ask_json(
         client,
         role_messages(record, catalogue),
-        RolePlan.model_json_schema(),
+        role_schema(record),
         name="role_plan",
         purpose="role_assign",
-        max_tokens=ROLES_MAX_TOKENS,
+        max_tokens=_roles_budget(record),
     )
     why: str | None = answer.error
     if answer.data is not None:

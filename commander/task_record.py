@@ -13,7 +13,7 @@ record's own validation depends on them.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal, get_args
 
@@ -421,12 +421,22 @@ class TaskRecord(BaseModel):
         return v
 
     @classmethod
-    def llm_schema(cls) -> dict[str, Any]:
-        """The JSON Schema the LLM fills: everything but ``text`` (we keep the original)."""
+    def llm_schema(cls, roster: Sequence[str] | None = None) -> dict[str, Any]:
+        """The JSON Schema the LLM fills: everything but ``text`` (we keep the original).
+
+        With a roster, UAV ids are an enum of the live ones and the list is bounded: servers
+        that compile the schema into a grammar (llama.cpp, vLLM) then cannot let a small
+        model ramble through invented ids until ``max_tokens``.
+        """
         schema = cls.model_json_schema()
         schema["properties"].pop("text", None)
         if "required" in schema:
             schema["required"] = [f for f in schema["required"] if f != "text"]
+        if roster:
+            uavs = schema["properties"]["uavs"]
+            uavs["items"] = {"enum": sorted(roster)}
+            uavs["uniqueItems"] = True
+            uavs["maxItems"] = len(roster)
         return schema
 
 

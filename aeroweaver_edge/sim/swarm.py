@@ -58,6 +58,7 @@ class SwarmOptions:
     share_experience: bool = True
     deadline_s: float = 30.0
     mission_text: str | None = None
+    top_k: int = 8  # task skills activated per UAV by the Commander (plus hold_position)
     swarm: str = "sim"
 
 
@@ -83,6 +84,7 @@ class RunSummary:
     llm_calls: int = 0
     note: str = ""
     mission: dict[str, Any] | None = None
+    tokens_by_agent: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -107,6 +109,7 @@ class RunSummary:
             "deadline_misses": self.deadline_misses,
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
+            "tokens_by_agent": self.tokens_by_agent,
             "setup_tokens": self.setup_tokens,
             "mission": self.mission,
             "llm_calls": self.llm_calls,
@@ -249,6 +252,7 @@ async def run_swarm(
     on_round: Callable[[RoundLog, ProgressBoard], Awaitable[None]] | None = None,
     plan_factory: Callable[[list[str]], Awaitable[MissionPlan]] | None = None,
     fault: Callable[[RoundLog, _Daemons], Awaitable[None]] | None = None,
+    on_commander: Callable[[Commander], None] | None = None,
 ) -> RunSummary:
     started = time.monotonic()
     task = make_task(opts.task, opts.uavs, max_rounds=opts.max_rounds)
@@ -302,6 +306,8 @@ async def run_swarm(
         commander = Commander(cmdr_mesh, opts.swarm)
         await commander.start()
         stack.push_async_callback(commander.aclose)
+        if on_commander is not None:
+            on_commander(commander)
 
         configs = [
             UavConfig(
@@ -332,7 +338,7 @@ async def run_swarm(
             plan = await plan_factory(roster)
         elif opts.mission_text is not None:
             planner_llm = llm if opts.selector == "llm" else None
-            plan = await _plan_from_text(opts.mission_text, roster, planner_llm)
+            plan = await _plan_from_text(opts.mission_text, roster, planner_llm, opts.top_k)
         else:
             plan = template_plan(opts.task, uavs, f"{opts.task}-s{opts.seed}")
         if plan.task != opts.task:
@@ -345,12 +351,18 @@ async def run_swarm(
         if missing:
             raise RuntimeError(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
 
-        for ep in range(opts.episodes):
-            result = await runner.run_episode(ep)
-            summary.episodes.append(_episode_dict(ep, result, commander.board))
-            if ep + 1 < opts.episodes:
-                # Let finalised experience reach same-role peers before the next episode.
-                await asyncio.sleep(0.3)
+        try:
+            for ep in range(opts.episodes):
+                result = await runner.run_episode(ep)
+                summary.episodes.append(_episode_dict(ep, result, commander.board))
+                if ep + 1 < opts.episodes:
+                    # Let finalised experience reach same-role peers before the next episode.
+                    await asyncio.sleep(0.3)
+        except asyncio.CancelledError:
+            # Operator stop (Ctrl-C / SIGTERM): every UAV is told to hold, then all close.
+            commander.end_mission("operator stop")
+            runner.shutdown()
+            raise
         runner.shutdown()
         await daemons.stop()
         await asyncio.sleep(0.2)  # last reports
@@ -370,21 +382,28 @@ async def run_swarm(
         completion = sum(p.completion_tokens for p in board.uavs.values())
         summary.tokens = {"prompt": prompt, "completion": completion, "total": prompt + completion}
         summary.llm_calls = sum(p.llm_calls for p in board.uavs.values())
+        for e in summary.episodes:
+            e["tokens"] = board.episode_tokens.get(e["episode"], 0)
+        summary.tokens_by_agent = {
+            u: p.prompt_tokens + p.completion_tokens for u, p in sorted(board.uavs.items())
+        }
     summary.wall_s = time.monotonic() - started
     return summary
 
 
-async def _plan_from_text(text: str, roster: list[str], llm: LLMConfig | None) -> MissionPlan:
+async def _plan_from_text(
+    text: str, roster: list[str], llm: LLMConfig | None, k: int = 8
+) -> MissionPlan:
     """The Commander's harness on the live roster; setup tokens are counted once, here."""
     from commander.harness import plan_mission
 
     registry = load_skills()
     if llm is None:
-        return await plan_mission(text, roster, registry, None)
+        return await plan_mission(text, roster, registry, None, k)
     from aeroweaver_edge.llm.client import ChatClient
 
     async with ChatClient.from_config(llm) as client:
-        return await plan_mission(text, roster, registry, client)
+        return await plan_mission(text, roster, registry, client, k)
 
 
 def mission_dict(plan: MissionPlan) -> dict[str, Any]:

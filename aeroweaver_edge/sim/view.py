@@ -31,7 +31,10 @@ class LiveView:
                 and (last.episode, last.round) == (log.episode, log.round)
             ):
                 what = ("HOLD " if last.held else "") + last.invocation
-            parts.append(f"{uav} {what or '?'} r={res.rewards[uav]:+.2f}")
+            tokens = rep.prompt_tokens + rep.completion_tokens if rep else 0
+            role = f"[{rep.role}] " if rep and rep.role else ""
+            tok = f" tok={tokens}" if tokens else ""
+            parts.append(f"{uav} {role}{what or '?'} r={res.rewards[uav]:+.2f}{tok}")
         status = f" [{res.reason}]" if res.done else ""
         self.console.print(
             f"ep {log.episode} round {log.round + 1:2d} | "

@@ -1,0 +1,83 @@
+"""Faults a swarm must survive: an LLM endpoint that hangs, a mid-mission reassignment,
+and an operator stop."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import subprocess
+import sys
+
+from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
+from aeroweaver_edge.sim.runner import RoundLog
+from aeroweaver_edge.sim.swarm import SwarmOptions, run_swarm
+from commander.commander import Commander
+from commander.plan import MissionPlan, UavAssignment, template_plan
+from commander.progress import ProgressBoard
+
+
+async def test_hanging_endpoint_holds_every_uav_inside_the_round_and_opens_the_breaker() -> None:
+    rounds = 5
+    async with FakeProvider(Policy(hang=True)) as fake:
+        llm = LLMConfig(
+            base_url=fake.base_url, model="fake-model", deadline_s=0.5, retries=0,
+            breaker_failures=2, breaker_reset_s=60.0,
+        )  # fmt: skip
+        opts = SwarmOptions(uavs=3, seed=2, max_rounds=rounds, selector="llm", beta=0.0, llm=llm)
+        summary = await run_swarm(opts)
+        calls = fake.chat_calls
+
+    assert summary.episodes[0]["rounds"] == rounds
+    assert summary.holds == 3 * rounds  # every decision became a hold of that UAV only
+    assert summary.deadline_misses == 0  # ...inside the round: the world never waited it out
+    # Each daemon probed once, then tried until its breaker opened and stopped calling.
+    assert calls <= 3 * (1 + 2) + 3  # probes + breaker_failures per daemon (+ half-open slack)
+
+
+async def test_a_reassignment_mid_mission_is_picked_up_by_the_running_daemons() -> None:
+    commander: list[Commander] = []
+    switched = False
+
+    async def watch(log: RoundLog, board: ProgressBoard) -> None:
+        nonlocal switched
+        if log.round == 2 and not switched:
+            switched = True
+            base = template_plan("coverage", ["uav0", "uav1", "uav2"], "coverage-s4")
+            hold_only = UavAssignment("observer", "Hold.", ("hold_position",))
+            plan = MissionPlan(
+                mission_id=base.mission_id,
+                task="coverage",
+                text="Hold where you are.",
+                assignments=dict.fromkeys(base.assignments, hold_only),
+            )
+            commander[0].publish(plan)
+
+    opts = SwarmOptions(uavs=3, seed=4, max_rounds=8, selector="scripted", beta=0.0)
+    summary = await run_swarm(opts, on_round=watch, on_commander=commander.append)
+    board = commander[0].board
+
+    assert summary.episodes[0]["rounds"] == 8
+    for uav in ("uav0", "uav1", "uav2"):
+        last = board.uavs[uav].last
+        assert last is not None
+        assert (last.role, last.invocation) == ("observer", "hold_position()")
+        assert board.ready[uav] == "observer"  # the daemon acknowledged its rebuilt context
+
+
+def test_operator_stop_ends_the_run_cleanly(tmp_path: os.PathLike[str]) -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "aeroweaver_edge.cli", "sim", "coverage", "--selector", "scripted",
+         "--episodes", "200", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    try:
+        asyncio.run(asyncio.sleep(4.0))  # past start-up, into the episodes
+        proc.send_signal(signal.SIGINT)
+        _out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    assert "every UAV was told to hold" in err

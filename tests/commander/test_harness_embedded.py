@@ -1,0 +1,45 @@
+"""The Commander's harness on the real embedded model: structure only.
+
+SmolLM2-135M has no judgement; whatever it answers, the harness must return a valid plan
+(from the LLM or, after a rejected answer, from the fallback) and count setup tokens.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from aeroweaver_edge.llm import embedded
+from aeroweaver_edge.llm.client import ChatClient
+from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable
+from aeroweaver_edge.skills import load_skills
+from commander.harness import plan_mission
+
+
+def _missing() -> str | None:
+    try:
+        embedded.check_available()
+    except EmbeddedUnavailable as exc:
+        return str(exc)
+    return None
+
+
+@pytest.mark.embedded
+@pytest.mark.skipif(_missing() is not None, reason=str(_missing()))
+async def test_plan_mission_on_the_embedded_model() -> None:
+    roster = ["uav0", "uav1", "uav2"]
+    async with EmbeddedServer() as server:
+        client = ChatClient(server.base_url, server.model, deadline_s=60.0)
+        async with client:
+            plan = await plan_mission(
+                "Cover the three landmarks with three drones", roster, load_skills(), client
+            )
+    assert plan.task == "coverage"
+    assert plan.record is not None
+    assert sorted(plan.record.uavs) == roster
+    assert plan.parse_source in {"llm", "fallback"}
+    assert plan.roles_source in {"llm", "template"}
+    assert plan.setup_tokens > 0  # the calls were made and counted, whatever they answered
+    for a in plan.assignments.values():
+        assert a.role == "searcher"
+        assert "cover_landmark" in a.skills
+        assert a.skills[-1] == "hold_position"
