@@ -30,7 +30,7 @@ from aeroweaver_edge.wire import (
 
 if TYPE_CHECKING:
     from aeroweaver_edge.agent.memory import AsyncExperienceMemory
-    from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.mesh import Mesh, Subscription
     from aeroweaver_edge.skills import SkillRegistry
 
 log = logging.getLogger(__name__)
@@ -110,12 +110,12 @@ class UavDaemon:
             sensing_radius_m=sensing_radius_m,
         )
 
-    async def _pump_context(self) -> None:
-        async for _key, msg in self.mesh.subscribe(self.keys.context, MissionContext):
+    async def _pump_context(self, sub: Subscription[MissionContext]) -> None:
+        async for _key, msg in sub:
             self._changed(self.mission.update_context, msg)
 
-    async def _pump_assignment(self) -> None:
-        async for _key, msg in self.mesh.subscribe(self.keys.assign(self.uav), Assignment):
+    async def _pump_assignment(self, sub: Subscription[Assignment]) -> None:
+        async for _key, msg in sub:
             self._changed(self.mission.update_assignment, msg)
 
     def _changed(self, update: Callable[[T], None], msg: T) -> None:
@@ -147,11 +147,13 @@ class UavDaemon:
             ),
         )
 
-    async def _pump_experience(self) -> None:
-        async for _key, rec in self.mesh.subscribe(self.keys.experience("*"), ExperienceRecord):
+    async def _pump_experience(self, sub: Subscription[ExperienceRecord]) -> None:
+        async for key, rec in sub:
             view = self.mission.view()
-            if self.memory is None or rec.uav == self.uav or rec.h.sender != rec.uav:
+            if self.memory is None or rec.uav == self.uav:
                 continue
+            if not rec.uav == rec.h.sender == key.split("/")[-2]:
+                continue  # a UAV shares only its own experience, on its own key
             if view is not None and rec.role == view.role and await self.memory.ingest(rec):
                 self.stats.experience_ingested += 1
 
@@ -164,13 +166,18 @@ class UavDaemon:
 
     async def run(self) -> DaemonStats:
         """Run until the clock says the run is over (or the task is cancelled)."""
+        # Subscribe now, before link.start() declares our liveliness token: a Commander that
+        # sees the token may publish at once, and that must reach us.
+        context = self.mesh.subscribe(self.keys.context, MissionContext)
+        assignment = self.mesh.subscribe(self.keys.assign(self.uav), Assignment)
         self._tasks = [
-            asyncio.create_task(self._pump_context(), name=f"{self.uav}-context"),
-            asyncio.create_task(self._pump_assignment(), name=f"{self.uav}-assignment"),
+            asyncio.create_task(self._pump_context(context), name=f"{self.uav}-context"),
+            asyncio.create_task(self._pump_assignment(assignment), name=f"{self.uav}-assignment"),
         ]
         if self.memory is not None and self.cfg.agent.share_experience:
+            shared = self.mesh.subscribe(self.keys.experience("*"), ExperienceRecord)
             self._tasks.append(
-                asyncio.create_task(self._pump_experience(), name=f"{self.uav}-experience")
+                asyncio.create_task(self._pump_experience(shared), name=f"{self.uav}-experience")
             )
         try:
             await self.link.start()
@@ -191,6 +198,11 @@ class UavDaemon:
                 if self._on_round is not None:
                     await self._on_round(out)
         finally:
+            # Whatever ends the daemon (run over, Ctrl-C, SIGTERM, a bug), its body holds.
+            try:
+                await self.ports.vehicle.hold()
+            except Exception:
+                log.exception("%s: hold on shutdown failed", self.uav)
             for t in self._tasks:
                 t.cancel()
             for t in self._tasks:
