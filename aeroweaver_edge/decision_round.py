@@ -192,7 +192,10 @@ async def _decide_and_act(
         altitude_m=rc.altitude_m,
         sensing_radius_m=rc.sensing_radius_m,
     )
-    cs = build_candidates(rc.registry, view.skills, obs, ctx, rc.agent.max_labels)
+    budget = rc.agent.max_labels
+    if rc.selector.label_budget is not None:
+        budget = min(budget, rc.selector.label_budget)
+    cs = build_candidates(rc.registry, view.skills, obs, ctx, budget)
     if cs.overflow:
         await rc.vehicle.hold()
         return _held(tick, f"{cs.overflow} options beyond the label budget", state_text, started)

@@ -101,6 +101,11 @@ class Selector(Protocol):
 
     name: str
 
+    @property
+    def label_budget(self) -> int | None:
+        """How many labels (A, B, ...) this selector can score; ``None``: no limit known."""
+        ...
+
     async def score(self, request: DecisionRequest) -> LabelScores: ...
 
     async def aclose(self) -> None: ...

@@ -16,6 +16,7 @@ How logprobs are used follows the endpoint probe (``llm.probe``):
 from __future__ import annotations
 
 import logging
+import string
 from dataclasses import replace
 from typing import Any
 
@@ -77,6 +78,20 @@ class LLMSelector:
         self.probe = probe
         level = logging.INFO if probe.ok else logging.WARNING
         log.log(level, "%s (decided from a live decision)", probe.line())
+
+    @property
+    def label_budget(self) -> int | None:
+        """Leading letters A, B, ... that the model's tokenizer keeps as one token each (from
+        the probe's ``/tokenize`` check); a label of two tokens has no first-token logprob."""
+        letters = self.probe.single_token_labels if self.probe is not None else None
+        if letters is None:
+            return None
+        budget = 0
+        for expected, letter in zip(string.ascii_uppercase, sorted(letters), strict=False):
+            if expected != letter:
+                break
+            budget += 1
+        return budget
 
     async def score(self, request: DecisionRequest) -> LabelScores:
         labels = [c.label for c in request.candidates]

@@ -69,6 +69,10 @@ class NearestUncoveredScorer:
     def __init__(self, temperature: float = 1.0) -> None:
         self.temperature = temperature
 
+    @property
+    def label_budget(self) -> int | None:
+        return None
+
     async def score(self, request: DecisionRequest) -> LabelScores:
         obs = request.observation
         owner = _greedy_assignment(obs)

@@ -332,3 +332,35 @@ async def test_shared_client_is_not_closed(fp: FakeProvider) -> None:
         await client.chat([{"role": "user", "content": "hi"}])  # still usable
     finally:
         await client.aclose()
+
+
+@pytest.mark.parametrize(
+    ("letters", "budget"),
+    [
+        (None, None),  # the endpoint cannot tokenize: no limit known
+        (tuple("ABCDEFGHIJKLMNOPQRSTUVWXYZ"), 26),
+        (("A", "B", "C", "E"), 3),  # "D" is two tokens: labels stop before it
+        ((), 0),
+    ],
+)
+async def test_label_budget_follows_the_single_token_check(
+    fp: FakeProvider, letters: tuple[str, ...] | None, budget: int | None
+) -> None:
+    probe = ProbeResult(kind="ok", label_mass=0.9, single_token_labels=letters)
+    sel = selector(fp, probe)
+    try:
+        assert sel.label_budget == budget
+    finally:
+        await sel.aclose()
+
+
+async def test_probe_reports_two_token_letters_from_the_endpoint(fp: FakeProvider) -> None:
+    fp.policy = Policy(tokenizer="split")
+    async with ChatClient(fp.base_url, "fake-model") as client:
+        probe = await probe_endpoint(client)
+    assert probe.single_token_labels == ()
+    sel = selector(fp, probe)
+    try:
+        assert sel.label_budget == 0
+    finally:
+        await sel.aclose()
