@@ -14,8 +14,9 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Sequence
 
+from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.client import ChatClient
-from aeroweaver_edge.skills import SkillRegistry
+from aeroweaver_edge.skills import SkillRegistry, load_skills
 from commander.activation import DEFAULT_CATALOGUE, DEFAULT_K, activate, task_catalogue
 from commander.mission_parser import parse_mission
 from commander.plan import MissionPlan, UavAssignment
@@ -74,3 +75,15 @@ async def plan_mission(
 
 
 __all__ = ["plan_mission"]
+
+
+async def plan_from_text(
+    text: str, roster: Sequence[str], llm: LLMConfig | None, k: int = DEFAULT_K
+) -> MissionPlan:
+    """``plan_mission`` with the shipped skills and, if configured, an LLM endpoint; the
+    client lives only for the setup calls (their tokens are counted once, here)."""
+    registry = load_skills()
+    if llm is None:
+        return await plan_mission(text, roster, registry, None, k)
+    async with ChatClient.from_config(llm) as client:
+        return await plan_mission(text, roster, registry, client, k)

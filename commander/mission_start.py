@@ -20,6 +20,7 @@ from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.sim.tasks import TASKS, make_task
 from aeroweaver_edge.wire import Keys, last_chunk
 from commander.commander import Commander
+from commander.harness import plan_from_text
 from commander.progress import ProgressBoard, UavProgress
 
 
@@ -54,8 +55,6 @@ async def start_mission(
     opts: MissionStartOptions,
     on_round: Callable[[RoundLog, ProgressBoard], Awaitable[None]] | None = None,
 ) -> dict[str, Any]:
-    from aeroweaver_edge.sim.swarm import _plan_from_text, mission_dict
-
     started = time.monotonic()
     out: dict[str, Any] = {"text": opts.text, "episodes": [], "ended": "not started"}
     async with contextlib.AsyncExitStack() as stack:
@@ -67,8 +66,8 @@ async def start_mission(
                 f"no UAV daemon of swarm {opts.swarm!r} is up (waited {opts.roster_wait_s:.0f} s)"
             )
         out["roster"] = roster
-        plan = await _plan_from_text(opts.text, roster, opts.llm, opts.top_k)
-        out["mission"] = mission_dict(plan)
+        plan = await plan_from_text(opts.text, roster, opts.llm, opts.top_k)
+        out["mission"] = plan.as_dict()
         commander = Commander(mesh, opts.swarm)
         await commander.start()
         stack.push_async_callback(commander.aclose)

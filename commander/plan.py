@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from commander.task_record import TaskRecord
@@ -35,6 +35,24 @@ class MissionPlan:
     @property
     def participants(self) -> list[str]:
         return sorted(self.assignments)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: the task record, how it was planned, and every UAV's assignment."""
+        return {
+            "mission_id": self.mission_id,
+            "text": self.text,
+            "task": self.task,
+            "record": self.record.model_dump(mode="json") if self.record is not None else None,
+            "parse_source": self.parse_source,
+            "roles_source": self.roles_source,
+            "catalogue": list(self.catalogue),
+            "assignments": {
+                u: {"role": a.role, "local_goal": a.local_goal, "skills": list(a.skills)}
+                for u, a in sorted(self.assignments.items())
+            },
+            "setup_tokens": self.setup_tokens,
+            "notes": list(self.notes),
+        }
 
 
 COVERAGE_SKILLS = ("cover_landmark", "explore_local", "return_in_bounds", "hold_position")

@@ -30,6 +30,7 @@ from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.sim.tasks import make_task
 from aeroweaver_edge.skills import load_skills
 from commander.commander import Commander
+from commander.harness import plan_from_text
 from commander.plan import MissionPlan, template_plan
 from commander.progress import ProgressBoard
 
@@ -338,13 +339,13 @@ async def run_swarm(
             plan = await plan_factory(roster)
         elif opts.mission_text is not None:
             planner_llm = llm if opts.selector == "llm" else None
-            plan = await _plan_from_text(opts.mission_text, roster, planner_llm, opts.top_k)
+            plan = await plan_from_text(opts.mission_text, roster, planner_llm, opts.top_k)
         else:
             plan = template_plan(opts.task, uavs, f"{opts.task}-s{opts.seed}")
         if plan.task != opts.task:
             raise ValueError(f"the mission is a {plan.task} mission but the world runs {opts.task}")
         summary.setup_tokens = plan.setup_tokens
-        summary.mission = mission_dict(plan)
+        summary.mission = plan.as_dict()
         commander.publish(plan)
         board_ref["board"] = commander.board
         missing = await commander.wait_ready(plan.participants, wait_s)
@@ -389,39 +390,6 @@ async def run_swarm(
         }
     summary.wall_s = time.monotonic() - started
     return summary
-
-
-async def _plan_from_text(
-    text: str, roster: list[str], llm: LLMConfig | None, k: int = 8
-) -> MissionPlan:
-    """The Commander's harness on the live roster; setup tokens are counted once, here."""
-    from commander.harness import plan_mission
-
-    registry = load_skills()
-    if llm is None:
-        return await plan_mission(text, roster, registry, None, k)
-    from aeroweaver_edge.llm.client import ChatClient
-
-    async with ChatClient.from_config(llm) as client:
-        return await plan_mission(text, roster, registry, client, k)
-
-
-def mission_dict(plan: MissionPlan) -> dict[str, Any]:
-    return {
-        "mission_id": plan.mission_id,
-        "text": plan.text,
-        "task": plan.task,
-        "record": plan.record.model_dump(mode="json") if plan.record is not None else None,
-        "parse_source": plan.parse_source,
-        "roles_source": plan.roles_source,
-        "catalogue": list(plan.catalogue),
-        "assignments": {
-            u: {"role": a.role, "local_goal": a.local_goal, "skills": list(a.skills)}
-            for u, a in sorted(plan.assignments.items())
-        },
-        "setup_tokens": plan.setup_tokens,
-        "notes": list(plan.notes),
-    }
 
 
 def write_json(summary: RunSummary, path: Path) -> None:
