@@ -116,6 +116,7 @@ def write_reports(data: dict[str, Any], out: Path, command: str) -> None:
     for n in names:
         ys = conds[n]["team_return"]
         ax.plot(range(len(ys)), ys, marker="o", label=n)
+    ax.set_xticks(range(data["episodes"]))
     ax.set_xlabel("episode (memory persists across episodes)")
     ax.set_ylabel("mean team return")
     ax.set_title(f"Coverage, {data['uavs']} UAVs, {data['selector']}")
