@@ -7,7 +7,6 @@ serves each port is chosen by the caller from config. One round is in ``decision
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -15,6 +14,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
+from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.mission_state import MissionState
 from aeroweaver_edge.observation import MissionView
 from aeroweaver_edge.ports import Clock, Perception, RewardSource, Selector, Vehicle
@@ -203,11 +203,7 @@ class UavDaemon:
                 await self.ports.vehicle.hold()
             except Exception:
                 log.exception("%s: hold on shutdown failed", self.uav)
-            for t in self._tasks:
-                t.cancel()
-            for t in self._tasks:
-                with contextlib.suppress(asyncio.CancelledError):
-                    await t
+            await cancel_all(self._tasks)
             await self.link.aclose()
         return self.stats
 

@@ -12,6 +12,7 @@ import contextlib
 import functools
 from typing import TYPE_CHECKING
 
+from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.wire import Assignment, HeaderFactory, Keys, MissionContext, ProgressReport
 from commander.plan import MissionPlan, UavAssignment
 from commander.progress import ProgressBoard
@@ -45,12 +46,7 @@ class Commander:
         self.mesh.declare_token(self.keys.alive_cmdr)
 
     async def aclose(self) -> None:
-        for t in self._tasks:
-            t.cancel()
-        for t in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await t
-        self._tasks.clear()
+        await cancel_all(self._tasks)
 
     async def _pump_reports(self, reports: Subscription[ProgressReport]) -> None:
         async for _key, rep in reports:

@@ -120,3 +120,20 @@ def ciphertexts(obs: Observation) -> list[int]:
         if c is not None and c not in out:
             out.append(c)
     return out
+
+
+def target_report(skill: str, target: Entity) -> Outgoing:
+    """The ``target`` message pursuers and the leader send: where a target is and how it
+    moves, so peers that cannot see it can follow (``follow_peer``)."""
+    return Outgoing(
+        to="*",
+        kind="target",
+        body={
+            "skill": skill,
+            "target_id": target.id,
+            "north": target.pos[0],
+            "east": target.pos[1],
+            "vn": target.vel[0],
+            "ve": target.vel[1],
+        },
+    )

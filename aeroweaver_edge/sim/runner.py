@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from aeroweaver_edge.config import SimConfig
+from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
 from aeroweaver_edge.sim.tasks.base import Task
 from aeroweaver_edge.wire import (
@@ -90,12 +91,7 @@ class WorldRunner:
         ]
 
     async def aclose(self) -> None:
-        for t in self._tasks:
-            t.cancel()
-        for t in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await t
-        self._tasks.clear()
+        await cancel_all(self._tasks)
 
     async def _pump_commands(self) -> None:
         async for key, cmd in self.mesh.subscribe(self.keys.sim_command("*"), SimCommand):

@@ -13,6 +13,7 @@ import contextlib
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.observation import VehicleState
 from aeroweaver_edge.ports import Health, RewardEvent, RoundTick
 from aeroweaver_edge.wire import (
@@ -65,12 +66,7 @@ class SimLink:
         ]
 
     async def aclose(self) -> None:
-        for t in self._tasks:
-            t.cancel()
-        for t in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await t
-        self._tasks.clear()
+        await cancel_all(self._tasks)
 
     async def _pump_perception(self, sub: Subscription[SimPerception]) -> None:
         async for _key, msg in sub:

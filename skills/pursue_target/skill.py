@@ -12,9 +12,9 @@ import math
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Intent, MoveTo, Outgoing
+from aeroweaver_edge.actions import HOLD, Intent, MoveTo
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import allowed, of_kind, visible
+from skills._common import allowed, of_kind, target_report, visible
 
 NAME = "pursue_target"
 ROLES = frozenset({"pursuer", "leader"})
@@ -43,16 +43,5 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     angle = 2.0 * math.pi / 3.0 * ctx.uav_index
     north = target.pos[0] + target.vel[0] * lead + ring * math.cos(angle)
     east = target.pos[1] + target.vel[1] * lead + ring * math.sin(angle)
-    report = Outgoing(
-        to="*",
-        kind="target",
-        body={
-            "skill": NAME,
-            "target_id": target.id,
-            "north": target.pos[0],
-            "east": target.pos[1],
-            "vn": target.vel[0],
-            "ve": target.vel[1],
-        },
-    )
+    report = target_report(NAME, target)
     return Intent(MoveTo((north, east, -ctx.altitude_m)), messages=(report,))

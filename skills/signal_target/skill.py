@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Hold, Intent, Outgoing
+from aeroweaver_edge.actions import HOLD, Hold, Intent
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import allowed, of_kind, visible
+from skills._common import allowed, of_kind, target_report, visible
 
 NAME = "signal_target"
 ROLES = frozenset({"leader"})
@@ -28,16 +28,5 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     target = visible(obs, params.target_id, "uav", TARGET_ROLES)
     if target is None or not allowed(ctx, ROLES):
         return HOLD
-    report = Outgoing(
-        to="*",
-        kind="target",
-        body={
-            "skill": NAME,
-            "target_id": target.id,
-            "north": target.pos[0],
-            "east": target.pos[1],
-            "vn": target.vel[0],
-            "ve": target.vel[1],
-        },
-    )
+    report = target_report(NAME, target)
     return Intent(Hold(), messages=(report,))
