@@ -19,6 +19,7 @@ class UavProgress:
     messages_sent: int = 0
     messages_dropped: int = 0
     llm_calls: int = 0
+    latencies_s: list[float] = field(default_factory=list)  # per decision round
 
 
 @dataclass
@@ -46,5 +47,6 @@ class ProgressBoard:
         p.messages_sent += rep.messages_sent
         p.messages_dropped += rep.messages_dropped
         p.llm_calls += rep.prompt_tokens > 0
+        p.latencies_s.append(rep.latency_s)
         tokens = rep.prompt_tokens + rep.completion_tokens
         self.episode_tokens[rep.episode] = self.episode_tokens.get(rep.episode, 0) + tokens

@@ -86,6 +86,8 @@ class RunSummary:
     note: str = ""
     mission: dict[str, Any] | None = None
     tokens_by_agent: dict[str, int] = field(default_factory=dict)
+    tokens_by_role: dict[str, int] = field(default_factory=dict)
+    decision_latency_s: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -111,6 +113,8 @@ class RunSummary:
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
             "tokens_by_agent": self.tokens_by_agent,
+            "tokens_by_role": self.tokens_by_role,
+            "decision_latency_s": self.decision_latency_s,
             "setup_tokens": self.setup_tokens,
             "mission": self.mission,
             "llm_calls": self.llm_calls,
@@ -121,6 +125,18 @@ class RunSummary:
 
 def _mean(xs: list[float]) -> float:
     return math.fsum(xs) / len(xs) if xs else math.nan
+
+
+def _percentiles(xs: list[float]) -> dict[str, float]:
+    """Round latency (observe to act, inside the daemon) over every decision of the run."""
+    if not xs:
+        return {}
+    ys = sorted(xs)
+
+    def at(q: float) -> float:
+        return round(ys[min(len(ys) - 1, round(q * (len(ys) - 1)))], 4)
+
+    return {"p50": at(0.5), "p95": at(0.95), "max": at(1.0)}
 
 
 def free_port() -> int:
@@ -388,6 +404,13 @@ async def run_swarm(
         summary.tokens_by_agent = {
             u: p.prompt_tokens + p.completion_tokens for u, p in sorted(board.uavs.items())
         }
+        by_role: dict[str, int] = {}
+        for p in board.uavs.values():
+            by_role[p.role] = by_role.get(p.role, 0) + p.prompt_tokens + p.completion_tokens
+        summary.tokens_by_role = dict(sorted(by_role.items()))
+        summary.decision_latency_s = _percentiles(
+            [x for p in board.uavs.values() for x in p.latencies_s]
+        )
     summary.wall_s = time.monotonic() - started
     return summary
 

@@ -88,6 +88,12 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
         f"dropped {s['messages_dropped']}; decode errors {s['decode_errors']}; "
         f"holds {s['holds']}; deadline misses {s['deadline_misses']}; wall {s['wall_s']:.2f} s"
     )
+    lat = s.get("decision_latency_s") or {}
+    if lat:
+        console.print(
+            f"decision latency p50 {lat['p50']:.3f} s, p95 {lat['p95']:.3f} s, "
+            f"max {lat['max']:.3f} s"
+        )
     if s.get("model"):
         console.print(
             f"model {s['model']}; probe: {escape(str(s['probe']))}; LLM calls {s['llm_calls']}; "
