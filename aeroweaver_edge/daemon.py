@@ -9,7 +9,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.config import UavConfig
@@ -51,7 +51,6 @@ class DaemonStats:
     corrected: int = 0
     experience_shared: int = 0
     experience_ingested: int = 0
-    outcomes: list[RoundOutcome] = field(default_factory=list)
 
 
 @dataclass
@@ -227,7 +226,6 @@ class UavDaemon:
             s.prompt_tokens += out.scores.prompt_tokens
             s.completion_tokens += out.scores.completion_tokens
             s.llm_calls += out.scores.prompt_tokens > 0 or out.scores.completion_tokens > 0
-        s.outcomes.append(out)
 
     def _report(self, out: RoundOutcome, view: MissionView | None) -> None:
         sc = out.scores

@@ -53,7 +53,6 @@ class RoundOutcome:
     latency_s: float = 0.0
     violations: tuple[str, ...] = ()
     chosen_by_agent: bool = False  # False when an error, not the selector, produced the hold
-    memo: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -263,5 +262,4 @@ async def _decide_and_act(
         latency_s=time.monotonic() - started,
         violations=gated.violations,
         chosen_by_agent=True,
-        memo=dict(intent.memo),
     )

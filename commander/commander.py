@@ -14,13 +14,12 @@ from typing import TYPE_CHECKING
 
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.wire import Assignment, HeaderFactory, Keys, MissionContext, ProgressReport
+from commander.activation import HOLD
 from commander.plan import MissionPlan, UavAssignment
 from commander.progress import ProgressBoard
 
 if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh, Subscription
-
-HOLD = "hold_position"
 
 
 class Commander:

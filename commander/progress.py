@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 
 from aeroweaver_edge.wire import ProgressReport
@@ -19,7 +20,8 @@ class UavProgress:
     messages_sent: int = 0
     messages_dropped: int = 0
     llm_calls: int = 0
-    latencies_s: list[float] = field(default_factory=list)  # per decision round
+    # Per-round latency, bounded: a long field mission must not grow the Commander.
+    latencies_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
 
 
 @dataclass
