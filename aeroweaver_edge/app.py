@@ -11,7 +11,6 @@ import logging
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 
-from aeroweaver_edge.agent.scripted import NearestUncoveredScorer
 from aeroweaver_edge.config import ConfigError, UavConfig
 from aeroweaver_edge.daemon import DaemonPorts, DaemonStats, UavDaemon
 from aeroweaver_edge.decision_round import RoundOutcome
@@ -36,7 +35,9 @@ async def open_selector(
 ) -> AsyncIterator[tuple[Selector, SelectorInfo]]:
     """The selector named in config; an LLM endpoint is probed once before use."""
     if cfg.agent.selector == "scripted":
-        yield NearestUncoveredScorer(), SelectorInfo(NearestUncoveredScorer.name)
+        from aeroweaver_edge.agent.scripted import ReferenceScorer
+
+        yield ReferenceScorer(), SelectorInfo(ReferenceScorer.name)
         return
     from aeroweaver_edge.agent.llm_selector import LLMSelector
     from aeroweaver_edge.llm.client import ChatClient

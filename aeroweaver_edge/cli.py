@@ -13,8 +13,10 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
+from aeroweaver_edge import defaults
 from aeroweaver_edge.config import ConfigError, LLMConfig, UavConfig, load_config
-from commander.mission_parser import MissionParseError
+from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.tasks import TASK_NAMES
 
 T = TypeVar("T")
 
@@ -47,15 +49,12 @@ def _run(coro: Coroutine[Any, Any, T]) -> T:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    from aeroweaver_edge.sim.swarm import SwarmOptions, run_swarm, write_json
-    from aeroweaver_edge.sim.view import LiveView, print_summary
+    from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm, write_json
+    from aeroweaver_edge.orchestration.view import LiveView, print_summary
 
-    task, uavs = args.task, args.uavs or 3
-    if args.mission:
-        task, uavs = _sim_shape(args.mission, args.uavs)
     opts = SwarmOptions(
-        task=task,
-        uavs=uavs,
+        task=args.task,
+        uavs=args.uavs,
         mission_text=args.mission,
         top_k=args.top_k,
         seed=args.seed,
@@ -82,21 +81,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
-def _sim_shape(text: str, uavs: int | None) -> tuple[str, int]:
-    """Task and team size a mission asks for, so the simulator can spawn that swarm; the
-    Commander then parses the mission again, properly, against the live roster."""
-    from aeroweaver_edge.sim.tasks import TASKS
-    from commander.mission_parser import parse_fallback
-
-    record = parse_fallback(text, [f"uav{i}" for i in range(uavs or 10)])
-    if record.task not in TASKS:
-        raise SystemExit(
-            f"aeroweaver: the mission reads as a {record.task} mission; the simulator runs only "
-            f"{', '.join(sorted(TASKS))} so far"
-        )
-    return record.task, uavs or len(record.uavs)
-
-
 def cmd_daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.app import run_daemon
 
@@ -116,8 +100,8 @@ def cmd_mission(args: argparse.Namespace) -> int:
     import json
 
     from aeroweaver_edge.config import MeshConfig
-    from aeroweaver_edge.sim.view import LiveView, print_mission
-    from commander.mission_start import MissionStartOptions, start_mission
+    from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
+    from aeroweaver_edge.orchestration.view import LiveView, print_mission
 
     mesh = MeshConfig(
         listen=args.listen or ["tcp/127.0.0.1:0"], connect=args.connect or [],
@@ -152,11 +136,11 @@ def cmd_mission(args: argparse.Namespace) -> int:
 
 
 def cmd_probe(args: argparse.Namespace) -> int:
-    from aeroweaver_edge.sim.swarm import SwarmOptions, _probe, _shared_llm
+    from aeroweaver_edge.orchestration.llm import probe, shared_llm
 
     async def go() -> str:
-        async with _shared_llm(SwarmOptions(llm=_llm_from_args(args))) as (llm, _source):
-            return f"{llm.base_url} {llm.model}: {await _probe(llm)}"
+        async with shared_llm(_llm_from_args(args), needed=True) as (llm, _source):
+            return f"{llm.base_url} {llm.model}: {await probe(llm)}"
 
     print(_run(go()))
     return 0
@@ -167,6 +151,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import memory
 
         return memory.main(["--records", str(args.records)])
+    if args.what == "scale":
+        from aeroweaver_edge.bench import scale
+
+        argv = ["--sizes", *map(str, args.sizes), "--rounds", str(args.rounds)]
+        argv += ["--seed", str(args.seed), "--task", args.task]
+        if args.in_process:
+            argv.append("--in-process")
+        return scale.main(argv)
     raise SystemExit(f"unknown benchmark {args.what!r}")
 
 
@@ -179,28 +171,51 @@ def _add_llm_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--llm-deadline", type=float, help="seconds per LLM decision (default 20)")
 
 
+def _swarm_size(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of UAVs: {text!r}") from None
+    if not 1 <= n <= defaults.MAX_UAVS:
+        raise argparse.ArgumentTypeError(f"must be 1..{defaults.MAX_UAVS} UAVs, got {n}")
+    return n
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="aeroweaver", description=__doc__)
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("sim", help="fly a simulated swarm mission (world + daemons + Commander)")
-    s.add_argument("task", nargs="?", default="coverage")
+    s.add_argument(
+        "task",
+        nargs="?",
+        choices=TASK_NAMES,
+        default=None,
+        help="benchmark task (default: coverage, or the mission's)",
+    )
     s.add_argument("--mission", help='natural-language mission, e.g. "Cover the three landmarks"')
     s.add_argument(
-        "--uavs", type=int, default=None, help="swarm size (default 3, or the mission's)"
+        "--uavs",
+        type=_swarm_size,
+        default=None,
+        help=f"UAVs we fly, 1..{defaults.MAX_UAVS} (default: the task's team, or the mission's)",
     )
     s.add_argument("--seed", type=int, default=1)
     s.add_argument("--episodes", type=int, default=1)
-    s.add_argument("--rounds", type=int, default=24, help="horizon in rounds")
+    s.add_argument("--rounds", type=int, default=defaults.MAX_ROUNDS, help="horizon in rounds")
     s.add_argument("--processes", action="store_true", help="one OS process per daemon")
     s.add_argument("--selector", choices=["llm", "scripted"], default="llm")
     s.add_argument(
-        "--beta", type=float, default=0.8, help="experience correction weight (0: plain)"
+        "--beta", type=float, default=defaults.BETA, help="experience correction weight (0: plain)"
     )
-    s.add_argument("--top-k", type=int, default=8, help="task skills per UAV (with --mission)")
+    s.add_argument(
+        "--top-k", type=int, default=defaults.TOP_K, help="task skills activated per UAV"
+    )
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
-    s.add_argument("--deadline", type=float, default=30.0, help="seconds a round may take")
+    s.add_argument(
+        "--deadline", type=float, default=defaults.DEADLINE_S, help="seconds a round may take"
+    )
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
     s.add_argument("--quiet", action="store_true", help="no per-round view")
     _add_llm_flags(s)
@@ -222,9 +237,11 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument("--sim-world", action="store_true", help="also run the kinematic world")
     ms.add_argument("--seed", type=int, default=1)
     ms.add_argument("--episodes", type=int, default=1)
-    ms.add_argument("--rounds", type=int, default=24)
+    ms.add_argument("--rounds", type=int, default=defaults.MAX_ROUNDS)
     ms.add_argument("--no-llm", action="store_true", help="rule-based parsing and roles only")
-    ms.add_argument("--top-k", type=int, default=8, help="task skills activated per UAV")
+    ms.add_argument(
+        "--top-k", type=int, default=defaults.TOP_K, help="task skills activated per UAV"
+    )
     ms.add_argument("--json", metavar="PATH", help="write task record, assignments, outcome")
     _add_llm_flags(ms)
     ms.set_defaults(func=cmd_mission)
@@ -234,8 +251,17 @@ def build_parser() -> argparse.ArgumentParser:
     pr.set_defaults(func=cmd_probe)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=["memory"])
-    b.add_argument("--records", type=int, default=10_000)
+    b.add_argument("what", choices=["memory", "scale"])
+    b.add_argument("--records", type=int, default=10_000, help="memory: records per role")
+    b.add_argument(
+        "--sizes", type=_swarm_size, nargs="+", default=[3, 10, 25, 50], help="scale: swarm sizes"
+    )
+    b.add_argument("--task", choices=TASK_NAMES, default="coverage", help="scale: task")
+    b.add_argument("--rounds", type=int, default=defaults.MAX_ROUNDS, help="scale: rounds per run")
+    b.add_argument("--seed", type=int, default=1, help="scale: layout seed")
+    b.add_argument(
+        "--in-process", action="store_true", help="scale: daemons in one process (no RSS)"
+    )
     b.set_defaults(func=cmd_bench)
     return p
 
@@ -252,8 +278,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"aeroweaver: config error: {exc}", file=sys.stderr)
         return 2
-    except MissionParseError as exc:
-        print(f"aeroweaver: cannot understand the mission: {exc}", file=sys.stderr)
+    except UserError as exc:
+        from commander.mission_parser import MissionParseError
+
+        what = "cannot understand the mission" if isinstance(exc, MissionParseError) else "error"
+        print(f"aeroweaver: {what}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

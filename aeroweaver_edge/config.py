@@ -13,6 +13,9 @@ from typing import Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from aeroweaver_edge import defaults as d
+from aeroweaver_edge.errors import UserError
+
 _ID_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_-")
 
 
@@ -38,7 +41,7 @@ class MeshConfig(_Section):
     multicast: bool = False
     namespace: str | None = None
     lease_ms: int = Field(default=10_000, ge=500)
-    comm_radius_m: float = Field(default=55.0, gt=0)
+    comm_radius_m: float = Field(default=d.COMM_RADIUS_M, gt=0)
     # Raw zenoh config overrides, path -> JSON5 value, applied last (escape hatch).
     zenoh_overrides: dict[str, str] = Field(default_factory=dict)
 
@@ -63,9 +66,9 @@ class AgentConfig(_Section):
     """The selector and its experience memory (paper defaults)."""
 
     selector: Literal["llm", "scripted"] = "llm"
-    beta: float = Field(default=0.8, ge=0)
-    gamma: float = Field(default=0.95, ge=0, le=1)
-    neighbourhood: int = Field(default=32, ge=1)
+    beta: float = Field(default=d.BETA, ge=0)
+    gamma: float = Field(default=d.GAMMA, ge=0, le=1)
+    neighbourhood: int = Field(default=d.NEIGHBOURHOOD, ge=1)
     memory_path: str | None = None  # None: in-memory SQLite (lost on exit)
     share_experience: bool = True
     max_labels: int = Field(default=26, ge=2, le=26)
@@ -77,11 +80,11 @@ class SafetyConfig(_Section):
     # NaN/inf would silently open the envelope (``max(x, nan)`` is ``x``; ``inf`` is no cap).
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    geofence_north_m: tuple[float, float] = (-70.0, 70.0)
-    geofence_east_m: tuple[float, float] = (-70.0, 70.0)
+    geofence_north_m: tuple[float, float] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
+    geofence_east_m: tuple[float, float] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
     altitude_band_m: tuple[float, float] = (2.0, 60.0)
-    max_speed_mps: float = Field(default=11.0, gt=0)
-    min_separation_m: float = Field(default=2.0, ge=0)
+    max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0)
+    min_separation_m: float = Field(default=d.MIN_SEPARATION_M, ge=0)
 
     @field_validator("geofence_north_m", "geofence_east_m", "altitude_band_m")
     @classmethod
@@ -94,7 +97,7 @@ class SafetyConfig(_Section):
 class VehicleConfig(_Section):
     backend: Literal["sim", "mavlink", "mavsdk"] = "sim"
     url: str | None = None  # e.g. udpin://0.0.0.0:14540 for mavlink
-    altitude_m: float = Field(default=5.0, gt=0)  # mission flight level
+    altitude_m: float = Field(default=d.ALTITUDE_M, gt=0)  # mission flight level
 
 
 class UavConfig(_Section):
@@ -103,7 +106,7 @@ class UavConfig(_Section):
     uav: str
     swarm: str = "default"
     index: int | None = Field(default=None, ge=0)  # None: the trailing digits of the id
-    round_s: float = Field(default=0.5, gt=0)
+    round_s: float = Field(default=d.ROUND_S, gt=0)
     mesh: MeshConfig = MeshConfig()
     llm: LLMConfig = LLMConfig()
     agent: AgentConfig = AgentConfig()
@@ -132,18 +135,18 @@ class SimConfig(_Section):
     """A simulated episode: world settings shared by the world and the runner."""
 
     task: str = "coverage"
-    uavs: int = Field(default=3, ge=1, le=10)
+    uavs: int = Field(default=3, ge=1, le=d.MAX_UAVS)
     seed: int = 1
-    max_rounds: int = Field(default=24, ge=1)
-    round_s: float = Field(default=0.5, gt=0)
-    deadline_s: float = Field(default=30.0, gt=0)
-    sensing_radius_m: float = Field(default=45.0, gt=0)
-    altitude_m: float = Field(default=5.0, gt=0)
-    max_speed_mps: float = Field(default=11.0, gt=0)
-    max_accel_mps2: float = Field(default=30.0, gt=0)
+    max_rounds: int = Field(default=d.MAX_ROUNDS, ge=1)
+    round_s: float = Field(default=d.ROUND_S, gt=0)
+    deadline_s: float = Field(default=d.DEADLINE_S, gt=0)
+    sensing_radius_m: float = Field(default=d.SENSING_RADIUS_M, gt=0)
+    altitude_m: float = Field(default=d.ALTITUDE_M, gt=0)
+    max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0)
+    max_accel_mps2: float = Field(default=d.MAX_ACCEL_MPS2, gt=0)
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError):
     """A config file could not be used; the message names the file and the key."""
 
 

@@ -1,7 +1,9 @@
 """The per-UAV daemon: wiring, lifecycle and the loop over rounds.
 
-It talks only to ports (Vehicle, Clock, Perception, RewardSource, Selector); which backend
-serves each port is chosen by the caller from config. One round is in ``decision_round``.
+It talks only to ports (Vehicle, Clock, Perception, RewardSource, PeerChannel, Selector);
+which backend serves each port is chosen by the caller from config. One round is in
+``decision_round``. The Commander's context and assignment arrive over the mesh; when the
+assignment changes, the peer channel gets the new role and the task's message routing.
 """
 
 from __future__ import annotations
@@ -14,10 +16,20 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
+from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
+from aeroweaver_edge.inbox import within
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.mission_state import MissionState
 from aeroweaver_edge.observation import MissionView
-from aeroweaver_edge.ports import Clock, Perception, RewardSource, Selector, Vehicle
+from aeroweaver_edge.ports import (
+    Clock,
+    PeerChannel,
+    Perception,
+    Reach,
+    RewardSource,
+    Selector,
+    Vehicle,
+)
 from aeroweaver_edge.safety_gate import SafetyGate
 from aeroweaver_edge.wire import (
     Assignment,
@@ -59,6 +71,22 @@ class DaemonPorts:
     clock: Clock
     perception: Perception
     rewards: RewardSource
+    peers: PeerChannel | None = None  # None: a Zenoh PeerLink on the daemon's own mesh
+
+
+def routing(task: str, radius_m: float) -> Reach:
+    """The message routing of ``task`` (its spec's rule), or plain range for a task the
+    registry does not know (a field mission)."""
+    from aeroweaver_edge.tasks import TASK_NAMES, get_spec
+
+    if task not in TASK_NAMES:
+        return within(radius_m)
+    spec = get_spec(task)
+
+    def reach(sender_role: str, receiver_role: str, distance_m: float) -> bool:
+        return spec.reaches(sender_role, receiver_role, distance_m, radius_m)
+
+    return reach
 
 
 class UavDaemon:
@@ -73,13 +101,10 @@ class UavDaemon:
         headers: HeaderFactory,
         memory: AsyncExperienceMemory | None = None,
         uav_index: int = 0,
-        altitude_m: float = 5.0,
-        sensing_radius_m: float = 45.0,
-        round_s: float = 0.5,
+        altitude_m: float = ALTITUDE_M,
+        round_s: float = ROUND_S,
         on_round: Callable[[RoundOutcome], Awaitable[None]] | None = None,
     ) -> None:
-        from aeroweaver_edge.peers import PeerLink
-
         self.cfg = cfg
         self.uav = cfg.uav
         self.keys = Keys(cfg.swarm)
@@ -89,7 +114,13 @@ class UavDaemon:
         self.memory = memory
         self.mission = MissionState(cfg.uav)
         self.stats = DaemonStats()
-        self.link = PeerLink(mesh, self.keys, cfg.uav, headers, cfg.mesh.comm_radius_m)
+        self._peer_link = None
+        if ports.peers is None:
+            from aeroweaver_edge.peers import PeerLink
+
+            self._peer_link = PeerLink(mesh, self.keys, cfg.uav, headers, cfg.mesh.comm_radius_m)
+        self.link: PeerChannel = ports.peers or self._peer_link  # type: ignore[assignment]
+        self._routed: tuple[str, str] | None = None
         self._on_round = on_round
         self._last_reward: float | None = None
         self._warmed: tuple[str, str] | None = None
@@ -106,7 +137,6 @@ class UavDaemon:
             agent=cfg.agent,
             memory=memory,
             altitude_m=altitude_m,
-            sensing_radius_m=sensing_radius_m,
         )
 
     async def _pump_context(self, sub: Subscription[MissionContext]) -> None:
@@ -179,7 +209,8 @@ class UavDaemon:
                 asyncio.create_task(self._pump_experience(shared), name=f"{self.uav}-experience")
             )
         try:
-            await self.link.start()
+            if self._peer_link is not None:
+                await self._peer_link.start()
             await self._catch_up()
             self._announce()
             while True:
@@ -189,8 +220,9 @@ class UavDaemon:
                     break
                 view = self.mission.view()
                 await self._warm(view)
+                self._route(view)
                 out = await run_round(self.rc, tick, view)
-                await self.ports.clock.finish(tick, out.sent)
+                await self.ports.clock.finish(tick, sent=out.sent, guess=out.guess)
                 self._account(out)
                 self._report(out, view)
                 await self._remember(out, view)
@@ -203,8 +235,16 @@ class UavDaemon:
             except Exception:
                 log.exception("%s: hold on shutdown failed", self.uav)
             await cancel_all(self._tasks)
-            await self.link.aclose()
+            if self._peer_link is not None:
+                await self._peer_link.aclose()
         return self.stats
+
+    def _route(self, view: MissionView | None) -> None:
+        """Give the peer channel this UAV's role and its task's routing when they change."""
+        key = (view.task, view.role) if view is not None else ("", "")
+        if key != self._routed:
+            self._routed = key
+            self.link.set_routing(key[1], routing(key[0], self.cfg.mesh.comm_radius_m))
 
     async def _warm(self, view: MissionView | None) -> None:
         """Build the memory index for a new role now, not inside a round's deadline."""
@@ -258,14 +298,14 @@ class UavDaemon:
         if self.memory is None or view is None or not out.chosen_by_agent:
             return
         await self.memory.append(
-            view.task,
-            view.role,
-            self.uav,
-            out.episode,
-            out.round,
-            out.state_text,
-            out.skill,
-            out.invocation,
+            task=view.task,
+            role=view.role,
+            uav=self.uav,
+            episode=out.episode,
+            round=out.round,
+            state_text=out.state_text,
+            skill=out.skill,
+            invocation=out.invocation,
         )
 
     async def _absorb_rewards(self) -> None:

@@ -1,5 +1,9 @@
 """One decision round of a UAV daemon (DESIGN §4): observe, list candidates, select,
 gate, execute on the own body, talk, report. Anything invalid becomes a hold of this UAV.
+
+It talks only to ports (Perception, Vehicle, PeerChannel, Selector) and the memory; the
+round can therefore run against the Zenoh backends, the in-memory peer channel or anything
+else that serves those ports.
 """
 
 from __future__ import annotations
@@ -14,36 +18,45 @@ from typing import TYPE_CHECKING
 from aeroweaver_edge.actions import HOLD, Intent
 from aeroweaver_edge.agent.candidates import CandidateSet, build_candidates
 from aeroweaver_edge.agent.describe import describe
-from aeroweaver_edge.agent.scoring import Choice, LabelScores, choose
+from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import AgentConfig
+from aeroweaver_edge.defaults import ALTITUDE_M, HOLD_SKILL
 from aeroweaver_edge.observation import MissionView, Observation
-from aeroweaver_edge.ports import DecisionRequest, Perception, RoundTick, Selector, Vehicle
+from aeroweaver_edge.ports import (
+    DecisionRequest,
+    PeerChannel,
+    Perception,
+    RoundTick,
+    Selector,
+    Vehicle,
+)
 from aeroweaver_edge.safety_gate import GatedCommand, SafetyGate
+from aeroweaver_edge.scores import Choice, LabelScores
 from aeroweaver_edge.skill_api import SkillContext
 from aeroweaver_edge.wire import MsgRef, Vec3
 
 if TYPE_CHECKING:
     from aeroweaver_edge.agent.memory import AsyncExperienceMemory
-    from aeroweaver_edge.peers import PeerLink
     from aeroweaver_edge.skills import SkillRegistry
 
 log = logging.getLogger(__name__)
 
-HOLD_SKILL = "hold_position"
 DEADLINE_MARGIN_S = 0.25  # leave the simulator / setpoint stream time to receive the command
+ZERO: Vec3 = (0.0, 0.0, 0.0)
+HOLD_TEXT = f"{HOLD_SKILL}()"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RoundOutcome:
     episode: int
     round: int
-    skill: str
-    invocation: str
-    label: str | None
-    held: bool
-    hold_reason: str | None
-    reason: str
-    vel: Vec3
+    skill: str = HOLD_SKILL
+    invocation: str = HOLD_TEXT
+    label: str | None = None
+    held: bool = True
+    hold_reason: str | None = None
+    reason: str = ""
+    vel: Vec3 = ZERO
     state_text: str = ""
     corrected: bool = False
     sent: tuple[MsgRef, ...] = ()
@@ -53,6 +66,7 @@ class RoundOutcome:
     latency_s: float = 0.0
     violations: tuple[str, ...] = ()
     chosen_by_agent: bool = False  # False when an error, not the selector, produced the hold
+    guess: str | None = None  # what a guessing skill recorded this round (the world scores it)
 
 
 @dataclass
@@ -66,11 +80,10 @@ class RoundContext:
     gate: SafetyGate
     vehicle: Vehicle
     perception: Perception
-    link: PeerLink
+    link: PeerChannel
     agent: AgentConfig
     memory: AsyncExperienceMemory | None = None
-    altitude_m: float = 5.0
-    sensing_radius_m: float = 45.0
+    altitude_m: float = ALTITUDE_M
     inbox_wait_s: float = 1.0
     memo: dict[str, str] = field(default_factory=dict)
 
@@ -119,15 +132,10 @@ async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None)
     except TimeoutError:
         await rc.vehicle.hold()
         out = RoundOutcome(
-            tick.episode,
-            tick.round,
-            HOLD_SKILL,
-            "hold_position()",
-            None,
-            True,
-            f"missed the {budget:.1f} s round deadline",
-            "deadline",
-            (0.0, 0.0, 0.0),
+            episode=tick.episode,
+            round=tick.round,
+            hold_reason=f"missed the {budget:.1f} s round deadline",
+            reason="deadline",
             latency_s=time.monotonic() - started,
         )
     return out
@@ -143,15 +151,10 @@ def _held(
 ) -> RoundOutcome:
     """A hold this UAV falls back to; not the selector's choice."""
     return RoundOutcome(
-        tick.episode,
-        tick.round,
-        HOLD_SKILL,
-        "hold_position()",
-        None,
-        True,
-        why,
-        why,
-        (0.0, 0.0, 0.0),
+        episode=tick.episode,
+        round=tick.round,
+        hold_reason=why,
+        reason=why,
         state_text=state_text,
         latency_s=time.monotonic() - started,
         scores=scores,
@@ -163,7 +166,8 @@ async def _decide_and_act(
     rc: RoundContext, tick: RoundTick, view: MissionView | None, started: float
 ) -> RoundOutcome:
     # 2. Observe, frozen for the round.
-    own, entities = await rc.perception.sense(tick)
+    percept = await rc.perception.sense(tick)
+    own = percept.own
     rc.link.publish_beacon(
         round=tick.round,
         pos=own.pos,
@@ -175,7 +179,14 @@ async def _decide_and_act(
         expect=tick.expect, timeout_s=rc.inbox_wait_s, max_round=tick.round - 1
     )
     obs = Observation(
-        rc.uav, tick.episode, tick.round, own, tuple(entities), tuple(messages), dict(rc.memo)
+        uav=rc.uav,
+        episode=tick.episode,
+        round=tick.round,
+        own=own,
+        entities=tuple(percept.entities),
+        messages=tuple(messages),
+        memo=dict(rc.memo),
+        facts=dict(percept.facts),
     )
     state_text = describe(obs)
     if view is None:
@@ -189,7 +200,6 @@ async def _decide_and_act(
         role=view.role,
         task=view.task,
         altitude_m=rc.altitude_m,
-        sensing_radius_m=rc.sensing_radius_m,
     )
     budget = rc.agent.max_labels
     if rc.selector.label_budget is not None:
@@ -212,6 +222,7 @@ async def _decide_and_act(
         skill_docs=[rc.registry.get(s).prompt_text() for s in view.skills if s in rc.registry],
         observation_text=state_text,
         candidates=cs.candidates,
+        task=view.task,
     )
     scores = await rc.selector.score(request)
     advantages = await _advantages(rc, view, state_text, cs)
@@ -230,29 +241,25 @@ async def _decide_and_act(
     await _apply(rc, gated)
     rc.memo.update(intent.memo)
 
-    # 6. Talk: directed messages to named (or all reachable) peers.
+    # 6. Talk: one send per message; "*" reaches every peer the routing rule lets it reach.
     sent: list[MsgRef] = []
     dropped = 0
     for m in intent.messages:
-        targets = sorted(rc.link.roster - {rc.uav}) if m.to == "*" else [m.to]
-        for to in targets:
-            ref = await rc.link.send(
-                to, m.kind, dict(m.body), round=tick.round, min_round=tick.round
-            )
-            if ref is None:
-                dropped += 1
-            else:
-                sent.append(ref)
+        ref = await rc.link.send(m.to, m.kind, dict(m.body), round=tick.round)
+        if ref is None:
+            dropped += 1
+        else:
+            sent.append(ref)
     return RoundOutcome(
-        tick.episode,
-        tick.round,
-        cand.skill,
-        cand.text,
-        cand.label,
-        gated.held,
-        "; ".join(gated.violations) if gated.held else None,
-        choice.reason,
-        gated.vel,
+        episode=tick.episode,
+        round=tick.round,
+        skill=cand.skill,
+        invocation=cand.text,
+        label=cand.label,
+        held=gated.held,
+        hold_reason="; ".join(gated.violations) if gated.held else None,
+        reason=choice.reason,
+        vel=gated.vel,
         state_text=state_text,
         corrected=choice.corrected,
         sent=tuple(sent),
@@ -262,4 +269,5 @@ async def _decide_and_act(
         latency_s=time.monotonic() - started,
         violations=gated.violations,
         chosen_by_agent=True,
+        guess=intent.memo.get("guess"),
     )

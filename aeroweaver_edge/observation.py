@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from aeroweaver_edge.wire import Entity, InboxMessage, Vec3
@@ -39,13 +40,19 @@ class MissionView:
 
 @dataclass(frozen=True)
 class Observation:
+    """Frozen for a round. ``facts`` are this UAV's private facts from its Perception port
+    (the goal landmark, symbol and key, cargo, its own formation slot: only what its role
+    may know, fresh every round). ``memo`` is what this UAV's own skills recorded in earlier
+    rounds (e.g. its last guess); it never comes from outside."""
+
     uav: str
     episode: int
     round: int
     own: VehicleState
     entities: tuple[Entity, ...] = ()
     messages: tuple[InboxMessage, ...] = ()
-    memo: dict[str, str] = field(default_factory=dict)  # per-UAV facts kept across rounds
+    memo: dict[str, str] = field(default_factory=dict)
+    facts: Mapping[str, str] = field(default_factory=dict)
 
     def of_kind(self, kind: str) -> list[Entity]:
         return [e for e in self.entities if e.kind == kind]

@@ -1,23 +1,24 @@
-"""One UAV's view of its peers: who is alive, where they are, and directed messages.
+"""One UAV's view of its peers over Zenoh: who is alive, where they are, and messages.
 
-The roster comes from liveliness tokens, positions from state beacons, and messages from
-this UAV's inbox. The communication radius (DESIGN §4.2) is enforced at the *sender* from
-the latest beacons, so a simulated swarm behaves like a radio mesh. Every receive-side
-check drops and counts instead of raising: a bad message must never stop the round loop.
+``PeerLink`` serves the ``PeerChannel`` port (``ports.py``). The roster comes from liveliness
+tokens, positions from state beacons, messages from this UAV's inbox key (directed) and
+every peer's broadcast key (``to="*"``: one put reaches every subscriber). Whether a message
+*reaches* this UAV is decided on receipt by the shared ``Inbox`` (routing rule + the
+positions of the round it was sent), so sending never waits for a peer. Every receive-side
+check drops and counts instead of raising.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
-import math
-from collections import Counter
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 
+from .inbox import Inbox, PeerStats
 from .mesh import Declared, Mesh, MeshClosed, MeshError
+from .ports import Reach, Scalar
 from .wire import (
+    BROADCAST,
     HeaderFactory,
     InboxMessage,
     Keys,
@@ -29,35 +30,33 @@ from .wire import (
 
 log = logging.getLogger(__name__)
 
-Body = Mapping[str, str | int | float | bool]
-
-_ARRIVED_MEMORY = 4096  # (sender, seq) pairs remembered so an early arrival is not "missing"
-
-
-@dataclass
-class PeerStats:
-    """Counters for reports and tests. ``dropped``: not sent; ``rejected``: not accepted."""
-
-    sent: int = 0
-    dropped: Counter[str] = field(default_factory=Counter)
-    received: int = 0
-    rejected: Counter[str] = field(default_factory=Counter)
-    missing: int = 0  # expected messages that had not arrived when collect_inbox gave up
+Body = Mapping[str, Scalar]
 
 
 class PeerLink:
-    """Roster, neighbour table and inbox of one UAV over a Mesh (which the caller owns)."""
+    """Roster, neighbour table and inbox of one UAV over a Mesh (which the caller owns).
+
+    ``announce=False`` makes a listen-only link (no liveliness token, no state queryable):
+    the simulated world uses it for the opponents it flies that hear messages (the
+    eavesdropper), which must not appear in any roster.
+    """
 
     def __init__(
-        self, mesh: Mesh, keys: Keys, uav: str, headers: HeaderFactory, comm_radius_m: float
+        self,
+        mesh: Mesh,
+        keys: Keys,
+        uav: str,
+        headers: HeaderFactory,
+        comm_radius_m: float,
+        *,
+        announce: bool = True,
     ) -> None:
         if headers.sender != uav:
             raise ValueError(f"header factory sends as {headers.sender!r}, not {uav!r}")
-        if comm_radius_m <= 0:
-            raise ValueError(f"comm_radius_m must be > 0, got {comm_radius_m}")
         self.uav = uav
         self.comm_radius_m = comm_radius_m
-        self.stats = PeerStats()
+        self.inbox = Inbox(uav, comm_radius_m)
+        self.announce = announce
         self._mesh = mesh
         self._keys = keys
         self._headers = headers
@@ -65,15 +64,16 @@ class PeerLink:
         self._roster: set[str] = set()
         self._beacons: dict[str, StateBeacon] = {}
         self._own: StateBeacon | None = None
-        self._pending: list[InboxMessage] = []
-        self._arrived: dict[tuple[str, int], None] = {}  # insertion-ordered, bounded
-        self._waiters: set[asyncio.Future[None]] = set()
         self._handles: list[Declared] = []
         self._token: Declared | None = None
         self._started = False
         self._closed = False
 
     # -- views ------------------------------------------------------------------------------
+
+    @property
+    def stats(self) -> PeerStats:
+        return self.inbox.stats
 
     @property
     def roster(self) -> frozenset[str]:
@@ -89,6 +89,9 @@ class PeerLink:
     def own_beacon(self) -> StateBeacon | None:
         return self._own
 
+    def set_routing(self, role: str, reach: Reach) -> None:
+        self.inbox.set_routing(role, reach)
+
     # -- lifecycle --------------------------------------------------------------------------
 
     async def start(self) -> None:
@@ -100,12 +103,16 @@ class PeerLink:
         keys, mesh = self._keys, self._mesh
         self._handles = [
             mesh.subscribe(keys.inbox(self.uav, "*"), InboxMessage, on_item=self._on_inbox),
-            mesh.declare_queryable(keys.state(self.uav), lambda: self._own),
-            mesh.subscribe(keys.state("*"), StateBeacon, on_item=self._on_beacon),
+            mesh.subscribe(keys.broadcast("*"), InboxMessage, on_item=self._on_broadcast),
             mesh.watch_liveliness(keys.alive_uav("*"), on_item=self._on_alive),
         ]
-        self._token = mesh.declare_token(keys.alive_uav(self.uav))
-        await self.refresh_neighbours()
+        if self.announce:
+            self._handles += [
+                mesh.declare_queryable(keys.state(self.uav), lambda: self._own),
+                mesh.subscribe(keys.state("*"), StateBeacon, on_item=self._on_beacon),
+            ]
+            self._token = mesh.declare_token(keys.alive_uav(self.uav))
+            await self.refresh_neighbours()
 
     async def refresh_neighbours(self, timeout_s: float = 0.5) -> int:
         """Ask every reachable peer's state queryable for its latest beacon, so a late joiner
@@ -122,19 +129,19 @@ class PeerLink:
         handles, self._handles = self._handles, []
         for handle in handles:
             await handle.aclose()
-        self._notify()
+        self.inbox.notify()
 
     async def wait_for_peers(self, peers: Iterable[str], timeout_s: float = 5.0) -> bool:
         """True once every id in ``peers`` is in the roster (start-up barrier)."""
         want = set(peers)
-        return await self._wait_until(lambda: want <= self._roster, timeout_s)
+        return await self.inbox.wait_until(lambda: want <= self._roster, timeout_s)
 
     # -- sending ----------------------------------------------------------------------------
 
     def publish_beacon(
         self, round: int, pos: Vec3, vel: Vec3, role: str = "", status: str = "nominal"
-    ) -> StateBeacon:
-        """Publish our state (DROP: latest wins) and remember it for the radius rule."""
+    ) -> None:
+        """Publish our state (DROP: latest wins); remember our position in this round."""
         beacon = StateBeacon(
             h=self._headers.next(),
             uav=self.uav,
@@ -145,29 +152,20 @@ class PeerLink:
             status=status,
         )
         self._own = beacon
+        self.inbox.note_position(round, pos)
         self._mesh.put(self._keys.state(self.uav), beacon)
-        return beacon
 
-    async def send(
-        self,
-        to: str,
-        kind: str,
-        body: Body,
-        *,
-        round: int,
-        min_round: int | None = None,
-        wait_s: float = 0.5,
-    ) -> MsgRef | None:
-        """Send a directed message if ``to`` is live and within the communication radius.
-
-        With ``min_round``, first wait up to ``wait_s`` for the recipient's beacon of that
-        round, so lockstep rounds judge range on the same positions every run.
-        Returns None (reason counted in ``stats.dropped``) when the message is not sent.
-        """
-        if min_round is not None and to in self._roster:
-            await self._wait_until(lambda: self._beacon_ready(to, min_round), wait_s)
-        reason = self._unreachable(to, min_round)
-        if reason is None and self._own is not None:  # (_unreachable checked _own; for mypy)
+    async def send(self, to: str, kind: str, body: Body, *, round: int) -> MsgRef | None:
+        """Send a message now; ``to="*"`` broadcasts. Never waits for a peer: whether it
+        reaches anyone is judged by each receiver. None (counted) when it cannot be sent."""
+        reason: str | None = None
+        if self._closed:
+            reason = "closed"
+        elif self._own is None:
+            reason = "no_own_position"
+        elif to != BROADCAST and to not in self._roster:
+            reason = "unknown_peer"
+        if reason is None and self._own is not None:
             msg = InboxMessage(
                 h=self._headers.next(),
                 to=to,
@@ -175,39 +173,23 @@ class PeerLink:
                 kind=kind,
                 body=dict(body),
                 sender_pos=self._own.pos,
+                sender_role=self.inbox.role,
+            )
+            key = (
+                self._keys.broadcast(self.uav)
+                if to == BROADCAST
+                else self._keys.inbox(to, self.uav)
             )
             try:
-                self._mesh.put(self._keys.inbox(to, self.uav), msg, block=True)
+                self._mesh.put(key, msg, block=True)
             except MeshError as exc:
                 reason = "closed" if isinstance(exc, MeshClosed) else "put_failed"
             else:
                 self.stats.sent += 1
                 return MsgRef(sender=self.uav, seq=msg.h.seq, to=to)
-        self.stats.dropped[reason or "no_own_position"] += 1
+        self.stats.dropped[reason or "put_failed"] += 1
         log.debug("%s -> %s: message dropped (%s)", self.uav, to, reason)
         return None
-
-    def _unreachable(self, to: str, min_round: int | None) -> str | None:
-        """Why ``to`` cannot be sent to now, judged on the latest beacons; None if it can."""
-        beacon = self._beacons.get(to)
-        if self._closed:
-            return "closed"
-        if to not in self._roster:
-            return "unknown_peer"
-        if beacon is None:
-            return "no_beacon"
-        if min_round is not None and beacon.round < min_round:
-            return "stale_beacon"
-        if self._own is None:
-            return "no_own_position"
-        if math.dist(self._own.pos, beacon.pos) > self.comm_radius_m:
-            return "out_of_range"
-        return None
-
-    def _beacon_ready(self, uav: str, min_round: int) -> bool:
-        """Stop waiting when the beacon is recent enough, or when the peer has left."""
-        beacon = self._beacons.get(uav)
-        return uav not in self._roster or (beacon is not None and beacon.round >= min_round)
 
     # -- receiving --------------------------------------------------------------------------
 
@@ -218,47 +200,34 @@ class PeerLink:
         *,
         max_round: int | None = None,
     ) -> list[InboxMessage]:
-        """Wait (at most ``timeout_s``) for every expected message, then return all accepted
-        messages since the last call, sorted by (sender, seq). Missing ones are counted.
+        """Wait (at most ``timeout_s``) for every expected message, then return the accepted
+        messages of rounds up to ``max_round`` (later ones stay queued), sorted by
+        (sender, seq). Missing ones are counted."""
+        return await self.inbox.collect(expect, timeout_s, max_round=max_round)
 
-        ``max_round`` keeps messages of later rounds queued for a later call, so a fast
-        sender's message still enters the recipient's *next* round (DESIGN §4.6).
-        """
-        want = {(ref.sender, ref.seq) for ref in expect}
-        if not await self._wait_until(lambda: want <= self._arrived.keys(), timeout_s):
-            missing = sorted(want - self._arrived.keys())
-            self.stats.missing += len(missing)
-            log.info("%s: %d expected message(s) missing: %s", self.uav, len(missing), missing)
-        if max_round is None:
-            out, self._pending = self._pending, []
+    def _accept(self, key: str, msg: InboxMessage, *, broadcast: bool) -> None:
+        sender = msg.h.sender
+        expected_key = (
+            self._keys.broadcast(sender) if broadcast else self._keys.inbox(self.uav, sender)
+        )
+        if key != expected_key:
+            self.inbox.reject("spoofed_sender", key)
+        elif msg.to != (BROADCAST if broadcast else self.uav):
+            self.inbox.reject("wrong_recipient", key)
+        elif sender == self.uav:
+            return  # our own broadcast, delivered locally
+        elif sender not in self._roster:
+            self.inbox.reject("unknown_sender", key)
+        elif not self._replay.accept(msg.h):
+            self.inbox.reject("replay", key)
         else:
-            out = [m for m in self._pending if m.round <= max_round]
-            self._pending = [m for m in self._pending if m.round > max_round]
-        out.sort(key=lambda m: (m.h.sender, m.h.seq))
-        return out
-
-    def _reject(self, reason: str, key: str) -> None:
-        self.stats.rejected[reason] += 1
-        log.debug("%s: rejected %s (%s)", self.uav, key, reason)
+            self.inbox.offer(msg)
 
     def _on_inbox(self, item: tuple[str, InboxMessage]) -> None:
-        key, msg = item
-        sender = msg.h.sender
-        if key != self._keys.inbox(self.uav, sender):
-            self._reject("spoofed_sender", key)
-        elif msg.to != self.uav:
-            self._reject("wrong_recipient", key)
-        elif sender not in self._roster:
-            self._reject("unknown_sender", key)
-        elif not self._replay.accept(msg.h):
-            self._reject("replay", key)
-        else:
-            self.stats.received += 1
-            self._pending.append(msg)
-            self._arrived[(sender, msg.h.seq)] = None
-            if len(self._arrived) > _ARRIVED_MEMORY:
-                del self._arrived[next(iter(self._arrived))]
-            self._notify()
+        self._accept(*item, broadcast=False)
+
+    def _on_broadcast(self, item: tuple[str, InboxMessage]) -> None:
+        self._accept(*item, broadcast=True)
 
     def _on_beacon(self, item: tuple[str, StateBeacon]) -> bool:
         """Latest wins by (epoch, seq); the key, the payload and the header must agree."""
@@ -266,14 +235,14 @@ class PeerLink:
         if beacon.uav == self.uav:
             return False  # our own beacon, delivered locally
         if key != self._keys.state(beacon.uav) or beacon.h.sender != beacon.uav:
-            self._reject("spoofed_beacon", key)
+            self.inbox.reject("spoofed_beacon", key)
             return False
         prev = self._beacons.get(beacon.uav)
         if prev is not None and (beacon.h.epoch, beacon.h.seq) <= (prev.h.epoch, prev.h.seq):
-            self._reject("stale_beacon", key)
+            self.inbox.reject("stale_beacon", key)
             return False
         self._beacons[beacon.uav] = beacon
-        self._notify()
+        self.inbox.notify()
         return True
 
     def _on_alive(self, item: tuple[str, bool]) -> None:
@@ -286,28 +255,7 @@ class PeerLink:
         else:
             self._roster.discard(uav)
             self._beacons.pop(uav, None)
-        self._notify()
+        self.inbox.notify()
 
-    # -- waiting ----------------------------------------------------------------------------
 
-    def _notify(self) -> None:
-        for fut in self._waiters:
-            if not fut.done():
-                fut.set_result(None)
-        self._waiters.clear()
-
-    async def _wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
-        """Re-check ``predicate`` on every state change until it holds or time runs out."""
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + timeout_s
-        while not predicate():
-            remaining = deadline - loop.time()
-            if remaining <= 0:
-                return False
-            fut: asyncio.Future[None] = loop.create_future()
-            self._waiters.add(fut)
-            try:
-                await asyncio.wait({fut}, timeout=remaining)
-            finally:
-                self._waiters.discard(fut)
-        return True
+__all__ = ["PeerLink", "PeerStats"]

@@ -1,15 +1,21 @@
-"""The ports the daemon's core talks to. Backends (sim, MAVLink, MAVSDK, LLM servers)
-implement these; the core never imports a backend."""
+"""The ports the daemon's core talks to. Backends (sim, MAVLink, MAVSDK, LLM servers, a
+Zenoh or in-memory peer channel) implement these; the core never imports a backend.
+
+Everything here sits at the bottom of the package: it imports only plain types
+(``observation``, ``scores``, ``wire``), never the agent, LLM or simulator layers.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Protocol
 
-from aeroweaver_edge.agent.scoring import LabelScores
 from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.wire import Entity, MsgRef
+from aeroweaver_edge.scores import LabelScores
+from aeroweaver_edge.wire import Entity, InboxMessage, MsgRef, Vec3
+
+Scalar = str | int | float | bool
 
 
 @dataclass(frozen=True)
@@ -47,15 +53,28 @@ class Clock(Protocol):
         """Wait for the next round; ``None`` when the run is over."""
         ...
 
-    async def finish(self, tick: RoundTick, sent: Sequence[MsgRef]) -> None:
+    async def finish(
+        self, tick: RoundTick, *, sent: Sequence[MsgRef], guess: str | None = None
+    ) -> None:
         """Close the round. A wall clock does nothing; a lockstep simulator learns that
-        this UAV is done and which messages it sent, so recipients can wait for them."""
+        this UAV is done, which messages it sent (so recipients can wait for them) and the
+        guess its skill recorded, if any (the world scores guesses)."""
         ...
 
 
+@dataclass(frozen=True)
+class Percept:
+    """What the Perception port delivers for one round, frozen at the tick: own state, the
+    entities within this UAV's sensing radius, and its private facts (role-restricted)."""
+
+    own: VehicleState
+    entities: Sequence[Entity] = ()
+    facts: Mapping[str, str] = field(default_factory=dict)
+
+
 class Perception(Protocol):
-    async def sense(self, tick: RoundTick) -> tuple[VehicleState, Sequence[Entity]]:
-        """Own state and the entities within sensing range, frozen at the tick."""
+    async def sense(self, tick: RoundTick) -> Percept:
+        """Own state, entities in range and private facts, frozen at the tick."""
         ...
 
 
@@ -94,6 +113,7 @@ class DecisionRequest:
     skill_docs: Sequence[str]
     observation_text: str
     candidates: Sequence[Candidate]
+    task: str = ""  # the mission's task type (what a task's reference policy is looked up by)
 
 
 class Selector(Protocol):
@@ -109,3 +129,52 @@ class Selector(Protocol):
     async def score(self, request: DecisionRequest) -> LabelScores: ...
 
     async def aclose(self) -> None: ...
+
+
+Reach = Callable[[str, str, float], bool]
+"""Message routing: ``reach(sender_role, receiver_role, distance_m)``."""
+
+
+class PeerChannel(Protocol):
+    """The talk side of a daemon (DESIGN §4 steps 2 and 6): its beacon, its inbox, its sends,
+    the live roster. ``aeroweaver_edge.peers.PeerLink`` serves it over Zenoh;
+    ``aeroweaver_edge.peer_memory.MemoryPeerHub`` serves it in memory (tests, benchmarks).
+
+    Semantics both implementations keep:
+
+    * ``send(to="*")`` broadcasts; any other ``to`` is one directed message. Sending never
+      waits for peers. Whether a message *reaches* a peer is judged at the receiver on the
+      positions of the round it was sent (the sender's position rides in the message, the
+      receiver's own comes from its beacon of that round) with the routing rule set by
+      ``set_routing``; messages that do not reach are dropped there and counted.
+    * ``collect_inbox`` waits (bounded) for the expected messages, then returns every
+      accepted message of rounds up to ``max_round``, sorted by (sender, sequence); later
+      rounds stay queued.
+    """
+
+    @property
+    def roster(self) -> frozenset[str]:
+        """Live peers, not including this UAV."""
+        ...
+
+    def set_routing(self, role: str, reach: Reach) -> None:
+        """This UAV's role and the routing rule of its current mission."""
+        ...
+
+    def publish_beacon(
+        self, round: int, pos: Vec3, vel: Vec3, role: str = "", status: str = "nominal"
+    ) -> None: ...
+
+    async def collect_inbox(
+        self,
+        expect: Iterable[MsgRef] = (),
+        timeout_s: float = 1.0,
+        *,
+        max_round: int | None = None,
+    ) -> list[InboxMessage]: ...
+
+    async def send(
+        self, to: str, kind: str, body: Mapping[str, Scalar], *, round: int
+    ) -> MsgRef | None:
+        """``None`` when the message could not be sent at all (closed, unknown peer)."""
+        ...

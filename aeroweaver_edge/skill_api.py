@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 from pydantic import BaseModel, ConfigDict
 
+from aeroweaver_edge.defaults import ALTITUDE_M
 from aeroweaver_edge.observation import Observation
 
 
@@ -38,8 +39,7 @@ class SkillContext:
     uav_index: int
     role: str
     task: str
-    altitude_m: float = 5.0
-    sensing_radius_m: float = 45.0
+    altitude_m: float = ALTITUDE_M
     peers: tuple[str, ...] = ()  # ids of the other UAVs in the mission
     settings: dict[str, float] = field(default_factory=dict)
 

@@ -12,13 +12,15 @@ from __future__ import annotations
 import logging
 import time
 from collections import Counter
-from typing import Any, Final, Literal, TypeVar
+from typing import Annotated, Any, Final, Literal, TypeVar
 
 import msgspec
 
 SCHEMA_VERSION: Final = 1
 MAX_PAYLOAD_BYTES: Final = 64 * 1024
 MAX_TEXT: Final = 4096
+MAX_FACTS: Final = 8
+MAX_FACT_CHARS: Final = 64
 
 log = logging.getLogger(__name__)
 
@@ -47,8 +49,15 @@ class StateBeacon(msgspec.Struct, frozen=True, kw_only=True, tag="state"):
     status: str = "nominal"
 
 
+BROADCAST: Final = "*"
+"""``InboxMessage.to`` of a message for every peer it reaches."""
+
+
 class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
-    """A directed peer message; enters the recipient's next round as data, never as a command."""
+    """A peer message (directed, or ``to="*"`` for every peer it reaches); enters the
+    recipient's next round as data, never as a command. Whether it reaches a recipient is
+    judged there, on ``sender_pos`` and the recipient's own position in ``round``, with the
+    mission's routing rule for ``sender_role``."""
 
     h: Header
     to: str
@@ -56,6 +65,7 @@ class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
     kind: str  # status / observation / intent / request / target / goal / ciphertext
     body: dict[str, str | int | float | bool] = {}
     sender_pos: Vec3 | None = None
+    sender_role: str = ""
     ttl_rounds: int = 8
 
 
@@ -141,8 +151,14 @@ class MsgRef(msgspec.Struct, frozen=True, kw_only=True, array_like=True):
     to: str = ""
 
 
+Fact = Annotated[str, msgspec.Meta(max_length=MAX_FACT_CHARS)]
+Facts = Annotated[dict[Fact, Fact], msgspec.Meta(max_length=MAX_FACTS)]
+"""A UAV's private facts (goal landmark, symbol, key, cargo, own slot): a few short strings."""
+
+
 class SimPerception(msgspec.Struct, frozen=True, kw_only=True, tag="perception"):
-    """Simulator -> one UAV: the round trigger plus what that UAV can sense, frozen."""
+    """Simulator -> one UAV: the round trigger plus what that UAV can sense, frozen, and its
+    private facts (only what its role may know; sent on that UAV's own key)."""
 
     h: Header
     uav: str
@@ -152,7 +168,8 @@ class SimPerception(msgspec.Struct, frozen=True, kw_only=True, tag="perception")
     pos: Vec3
     vel: Vec3
     entities: list[Entity] = []
-    expected_inbox: list[MsgRef] = []  # lockstep: messages sent to this UAV last round
+    expected_inbox: list[MsgRef] = []  # lockstep: messages that reach this UAV, sent last round
+    facts: Facts = {}
 
 
 class SimReward(msgspec.Struct, frozen=True, kw_only=True, tag="reward"):
@@ -166,7 +183,8 @@ class SimReward(msgspec.Struct, frozen=True, kw_only=True, tag="reward"):
 
 
 class SimCommand(msgspec.Struct, frozen=True, kw_only=True, tag="command"):
-    """One UAV -> simulator: its gated velocity for the round and the messages it sent."""
+    """One UAV -> simulator: its gated velocity for the round, the messages it sent and the
+    guess its skill recorded this round, if any (private communication: the world scores it)."""
 
     h: Header
     uav: str
@@ -175,6 +193,7 @@ class SimCommand(msgspec.Struct, frozen=True, kw_only=True, tag="command"):
     vel: Vec3
     held: bool = False
     sent: list[MsgRef] = []
+    guess: Fact | None = None
 
 
 class SimEpisode(msgspec.Struct, frozen=True, kw_only=True, tag="episode"):
@@ -224,6 +243,10 @@ class Keys:
 
     def inbox(self, to: str, sender: str = "*") -> str:
         return f"{self.root}/uav/{to}/inbox/{sender}"
+
+    def broadcast(self, sender: str = "*") -> str:
+        """Messages ``sender`` sends to every peer it reaches (one put, under its own prefix)."""
+        return f"{self.root}/uav/{sender}/broadcast"
 
     def report(self, uav: str = "*") -> str:
         return f"{self.root}/uav/{uav}/report"

@@ -17,14 +17,16 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Mapping, Sequence
 
+from aeroweaver_edge.defaults import CATALOGUE_SIZE, HOLD_SKILL, TOP_K
 from aeroweaver_edge.skills import SkillRegistry
+from aeroweaver_edge.tasks import get_spec
 from commander.retrieval import BM25Retriever
 from commander.roles import RoleAssignment
-from commander.task_record import TASKS, TaskRecord
+from commander.task_record import TaskRecord
 
-HOLD = "hold_position"
-DEFAULT_K = 8
-DEFAULT_CATALOGUE = 12
+HOLD = HOLD_SKILL
+DEFAULT_K = TOP_K
+DEFAULT_CATALOGUE = CATALOGUE_SIZE
 
 _ROLE_CONDITION = re.compile(r"^\s*(?:for\s+)?roles?\s*(?:is|are|:|=)\s*(.+)$", re.IGNORECASE)
 _PLACEHOLDER = re.compile(r"<[^>]*>")
@@ -68,7 +70,7 @@ def pack(query: str, role: str, goal: str) -> str:
 
 def task_query(record: TaskRecord) -> str:
     """The task-level query: the mission text plus what the record added (task and roles)."""
-    spec = TASKS[record.task]
+    spec = get_spec(record.task)
     return f"{record.text.strip()}\nTask: {spec.name} ({spec.summary})\nRoles: " + ", ".join(
         spec.role_names
     )
@@ -100,7 +102,7 @@ def activate(
         raise ValueError(f"k must be >= 0, got {k}")
     if HOLD not in registry:
         raise ValueError(f"the skill library has no {HOLD!r}, which every UAV must be given")
-    spec = TASKS[record.task]
+    spec = get_spec(record.task)
     out: dict[str, tuple[str, ...]] = {}
     for uav, a in assignments.items():
         stationary = a.role in spec.role_names and spec.role(a.role).stationary

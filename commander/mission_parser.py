@@ -22,21 +22,17 @@ from typing import Any, Literal
 
 from pydantic import ValidationError
 
+from aeroweaver_edge.defaults import ARENA_HALF_M
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
-from commander.task_record import (
-    ARENA_HALF_M,
-    TASK_TYPES,
-    TASKS,
-    TaskRecord,
-    task_roles,
-    validation_summary,
-)
+from aeroweaver_edge.tasks import get_spec, specs
+from commander.task_record import TASK_TYPES, TaskRecord, validation_summary
 
 PARSE_MAX_TOKENS = 300  # a full record is ~60-150 tokens
 ParseSource = Literal["llm", "fallback"]
 
 
-class MissionParseError(ValueError):
+class MissionParseError(UserError):
     """Neither the LLM nor the rules produced a valid task record; the message says why."""
 
 
@@ -156,92 +152,17 @@ _UAV_COUNT = re.compile(rf"\b{_NUM}\s+(?:of (?:our|the)\s+)?(?:[a-z-]+\s+)?{_UAV
 _NEGATED = re.compile(r"\b(?:no|not|never|nor)\s+(?:\w+\s+)?$|n't\s+(?:\w+\s+)?$")
 _TOTAL_ONE = re.compile(rf"\b(?:with|using|use|only|just)\s+(?:one|a single|1)\s+{_UAV_NOUN}")
 
-# role nouns as operators say them -> the task role they count
-_ROLE_NOUNS: dict[str, str] = {
-    "searchers?": "searcher",
-    "pursuers?|chasers?|hunters?|interceptors?": "pursuer",
-    "speakers?": "speaker",
-    "listeners?": "listener",
-    "senders?": "sender",
-    "receivers?": "receiver",
-    "members?": "member",
-    "leaders?": "leader",
-    "collectors?|carriers?|gatherers?": "collector",
-    "informed (?:drones?|uavs?|agents?)": "informed",
-    "evaders?|intruders?": "evader",
-    "eavesdroppers?": "eavesdropper",
-    "foragers?": "forager",
-    "adversar(?:y|ies)": "adversary",
-}
 
-# (pattern, weight): weight 2 = names the task on its own, 1 = supporting word
-_TASK_CUES: dict[str, tuple[tuple[str, int], ...]] = {
-    "coverage": (
-        (r"\bcover(?:s|ed|ing)?\b[^.;]{0,30}\blandmarks\b", 2),
-        (r"\bcoverage\b", 2),
-        (r"\bspread\b[^.;]{0,30}\b(?:out|over|across)\b", 2),
-        (r"\b(?:every|each|all(?: \w+)?) (?:of the )?landmarks?\b", 1),
-        (r"\bone (?:drone|uav|aircraft) (?:per|on|over|to|at) (?:each|every)\b", 1),
-        (r"\bcover(?:s|ed|ing)?\b", 1),
-    ),
-    "pursuit_evasion": (
-        (
-            r"\b(?:chase|chasing|pursue|pursuing|pursuit|catch|catching|intercept\w*|hunt\w*)\b"
-            r"[^.;]{0,40}\b(?:intruder|evader|runaway|fugitive|quadcopter|drone|target|it)\b",
-            2,
-        ),
-        (r"\bintruder\b|\bevader\b|\bevad(?:e|ing)\b|\bevasion\b|\brunaway\b", 2),
-        (r"\bpursuers?\b|\bchase\w*\b|\bpursu\w*\b|\bcatch\b|\bsurround\w*\b|\bintercept\w*\b", 1),
-    ),
-    "guided_navigation": (
-        (r"\blisteners?\b", 2),
-        (r"\bspeaker\b", 2),
-        (r"\bguid(?:e|es|ing)\b[^.;]{0,40}\bto\b", 2),
-        (
-            r"\b(?:direct|talk|steer)\w*\b[^.;]{0,40}\b(?:to|onto)\b[^.;]{0,20}\b(?:landmark|marker|goal)",
-            1,
-        ),
-        (r"\b(?:knows|tells?|broadcasts?)\b[^.;]{0,30}\b(?:goal|which landmark)", 1),
-    ),
-    "private_communication": (
-        (
-            r"\bsecret (?:message|symbol|code|word)\b|\bprivate (?:message|symbol|communication)\b",
-            2,
-        ),
-        (r"\bencrypt\w*\b|\bcipher\w*\b|\bciphertext\b|\bencod\w*\b|\bdecod\w*\b", 2),
-        (r"\beavesdropp\w*\b|\bshared key\b", 2),
-        (r"\bmessage\b|\bsymbol\b|\bkey\b|\bintercept\w*\b", 1),
-    ),
-    "circular_formation": (
-        (r"\bcircle\b|\bcircular\b|\bring\b|\bencircl\w*\b", 2),
-        (r"\bformation\b|\baround the (?:centre|center|middle)\b", 1),
-    ),
-    "line_formation": (
-        (r"\bline (?:up|formation)\b|\bform (?:a |an )?(?:straight )?line\b|\bstraight line\b", 2),
-        (r"\bin (?:a |one )?(?:row|line)\b|\bline of\b|\ba row\b", 2),
-        (r"\bformation\b|\bend ?points?\b|\bend markers?\b|\bevenly spaced\b|\bline\b", 1),
-    ),
-    "world_communication": (
-        (r"\bforagers?\b", 2),
-        (r"\bforests?\b|\bfood\b", 2),
-        (r"\bleader\b|\blead (?:drone|uav|aircraft)\b", 1),
-        (r"\bhunt\w*\b|\bcatch\b|\bgather\w*\b", 1),
-    ),
-    "collection_delivery": (
-        (r"\btreasures?\b", 2),
-        (r"\bdeliver\w*\b|\bdeposits?\b|\bdepots?\b", 2),
-        (r"\bcollect(?:s|ed|ing|ors?)?\b", 2),
-        (r"\bpick (?:up|them up)\b|\bdrop(?: \w+)? (?:off|at)\b|\bcarr(?:y|ies|iers?)\b", 1),
-    ),
-    "goal_concealment": (
-        (r"\bconceal\w*\b|\bdecoys?\b", 2),
-        (r"\bhid(?:e|es|ing)\b[^.;]{0,30}\b(?:goal|objective|target)\b", 2),
-        (r"\bwithout (?:revealing|giving away|showing)\b|\bmislead\w*\b", 2),
-        (r"\b(?:goal|target|objective)\b[^.;]{0,20}\bsecret\b|\bfake\b|\bfalse target\b", 1),
-        (r"\badversary\b|\bobserver\b|\bwatching\b", 1),
-    ),
+
+def _role_nouns(task: str) -> dict[str, str]:
+    """Role nouns as operators say them (regex) -> the task role they count, from the specs."""
+    return {r.nouns: r.name for r in get_spec(task).all_roles if r.nouns}
+
+
+# (pattern, weight) per task, from each task's spec: 2 = names the task on its own, 1 = support
+_CUES = {
+    name: tuple((re.compile(p), w) for p, w in spec.cues) for name, spec in specs().items()
 }
-_CUES = {t: tuple((re.compile(p), w) for p, w in cues) for t, cues in _TASK_CUES.items()}
 
 _CONSTRAINT_CUE = re.compile(
     r"\b(?:avoid|keep|don't|do not|must not|never|no two|without|stay|at least|at most|"
@@ -329,11 +250,8 @@ def stated_uav_count(text: str) -> int | None:
 
 def stated_role_counts(text: str, task: str) -> dict[str, int]:
     low = text.lower()
-    roles = set(task_roles(task))
     out: dict[str, int] = {}
-    for noun, role in _ROLE_NOUNS.items():
-        if role not in roles:
-            continue
+    for noun, role in _role_nouns(task).items():
         for m in re.finditer(rf"\b{_NUM}\s+(?:[a-z-]+\s+)?(?:{noun})\b", low):
             out[role] = max(out.get(role, 0), _num(m.group(1)))
     return out
@@ -398,7 +316,7 @@ def parse_constraints(text: str) -> tuple[str, ...]:
 
 def _pick_uavs(text: str, task: str, roster: Sequence[str], roles: Mapping[str, int]) -> list[str]:
     """Participating UAVs: named ids, else a stated count, else as many as the task uses."""
-    spec = TASKS[task]
+    spec = get_spec(task)
     live = sorted(roster, key=_natural)
     low = text.lower()
     named = [u for u in live if re.search(rf"\b{re.escape(u.lower())}\b", low)]
@@ -483,20 +401,22 @@ def parse_fallback(text: str, roster: Sequence[str]) -> TaskRecord:
 
 def _task_lines() -> str:
     lines = []
-    for spec in TASKS.values():
+    for spec in specs().values():
         roles = ", ".join(
             f"{r.name} ({r.min_count}..{'n' if r.max_count is None else r.max_count})"
             for r in spec.roles
         )
         scripted = (
-            f"; played by the environment: {', '.join(spec.scripted)}" if spec.scripted else ""
+            f"; played by the environment: {', '.join(spec.scripted_names)}"
+            if spec.scripted
+            else ""
         )
         lines.append(f"- {spec.name}: {spec.summary}. Our roles: {roles}{scripted}.")
     return "\n".join(lines)
 
 
 def _team_sizes() -> str:
-    return ", ".join(f"{s.name} {s.team_size}" for s in TASKS.values())
+    return ", ".join(f"{s.name} {s.team_size}" for s in specs().values())
 
 
 def parse_messages(text: str, roster: Sequence[str]) -> list[dict[str, str]]:

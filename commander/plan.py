@@ -1,9 +1,9 @@
-"""A mission plan: what the Commander publishes. Built from a template for a known task
-(here) or from a parsed mission (mission parsing, roles and activation)."""
+"""A mission plan: what the Commander publishes. Built by the harness (``commander.harness``)
+from a task name (``plan_for_task``: the task's template mission, roles and top-K activation,
+no LLM) or from mission text (``plan_mission``: parsing, roles and activation)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -28,7 +28,7 @@ class MissionPlan:
     setup_tokens: int = 0  # LLM tokens spent once on parsing, roles and activation
     notes: tuple[str, ...] = field(default_factory=tuple)
     record: TaskRecord | None = None  # the parsed task record (None for a template plan)
-    parse_source: str = "template"  # "llm" | "fallback" | "template"
+    parse_source: str = "template"  # "llm" | "fallback" | "template" (from the task name)
     roles_source: str = "template"  # "llm" | "template"
     catalogue: tuple[str, ...] = ()  # task-level candidate skills A^t, best first
 
@@ -53,36 +53,3 @@ class MissionPlan:
             "setup_tokens": self.setup_tokens,
             "notes": list(self.notes),
         }
-
-
-COVERAGE_SKILLS = ("cover_landmark", "explore_local", "return_in_bounds", "hold_position")
-
-_TEMPLATES: dict[str, tuple[str, str, str, tuple[str, ...]]] = {
-    # task: (mission text, role, local goal, active skills)
-    "coverage": (
-        "Cover every landmark with one drone each and hold there; avoid collisions.",
-        "searcher",
-        "Reach a landmark no other drone is covering and stay within 3 m of it.",
-        COVERAGE_SKILLS,
-    ),
-}
-
-
-def known_tasks() -> list[str]:
-    return sorted(_TEMPLATES)
-
-
-def template_plan(
-    task: str, uavs: Sequence[str], mission_id: str, text: str | None = None
-) -> MissionPlan:
-    """The fixed plan for a known task: every UAV gets the task's role and skill subset."""
-    if task not in _TEMPLATES:
-        raise ValueError(f"no template for task {task!r}; known: {', '.join(known_tasks())}")
-    default_text, role, goal, skills = _TEMPLATES[task]
-    return MissionPlan(
-        mission_id=mission_id,
-        task=task,
-        text=text or default_text,
-        assignments={u: UavAssignment(role, goal, skills) for u in uavs},
-        constraints=("stay inside the 140 m x 140 m arena", "keep at least 2 m from other drones"),
-    )

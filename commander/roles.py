@@ -20,8 +20,9 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints, Validation
 
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.skills import SkillDocument
+from aeroweaver_edge.tasks import get_spec
 from commander.mission_parser import JsonAnswer, ask_json
-from commander.task_record import TASKS, TaskRecord, validation_summary
+from commander.task_record import TaskRecord, validation_summary
 
 ROLES_MAX_TOKENS = 1200  # cap; the per-call budget scales with the team (see _roles_budget)
 RoleSource = Literal["llm", "template"]
@@ -61,7 +62,7 @@ def role_schema(record: TaskRecord) -> dict[str, Any]:
     schema = RolePlan.model_json_schema()
     choice = schema["$defs"]["_Choice"]["properties"]
     choice["uav"] = {"enum": sorted(record.uavs)}
-    choice["role"] = {"enum": list(TASKS[record.task].role_names)}
+    choice["role"] = {"enum": list(get_spec(record.task).role_names)}
     choice["local_goal"]["maxLength"] = 160
     items = schema["properties"]["assignments"]
     items["minItems"] = items["maxItems"] = len(record.uavs)
@@ -78,9 +79,9 @@ def _region_goal(record: TaskRecord) -> str:
 
 def template_roles(record: TaskRecord) -> dict[str, RoleAssignment]:
     """Default roles for the task, honouring the role counts the mission stated."""
-    spec = TASKS[record.task]
+    spec = get_spec(record.task)
     n = len(record.uavs)
-    counts = {r: c for r, c in spec.defaults(n).items() if c > 0}
+    counts = {r: c for r, c in spec.role_counts(n).items() if c > 0}
     stated = {r: c for r, c in record.role_counts.items() if r in spec.role_names}
     counts.update(stated)
     # Roles the mission did not fix absorb the difference, unbounded ones first.
@@ -105,7 +106,7 @@ def template_roles(record: TaskRecord) -> dict[str, RoleAssignment]:
 
 def check_roles(plan: RolePlan, record: TaskRecord) -> dict[str, RoleAssignment]:
     """Accept a proposal only if it fits the record; ``RoleError`` says what does not."""
-    spec = TASKS[record.task]
+    spec = get_spec(record.task)
     problems: list[str] = []
     seen = Counter(c.uav for c in plan.assignments)
     if dup := sorted(u for u, n in seen.items() if n > 1):
@@ -134,7 +135,7 @@ def check_roles(plan: RolePlan, record: TaskRecord) -> dict[str, RoleAssignment]
 
 def role_messages(record: TaskRecord, catalogue: Sequence[SkillDocument]) -> list[dict[str, str]]:
     """The Commander context: mission, record, roles and the candidate catalogue's docs."""
-    spec = TASKS[record.task]
+    spec = get_spec(record.task)
     roles = "\n".join(
         f"- {r.name}: {r.min_count}..{'n' if r.max_count is None else r.max_count} UAVs"
         f"{', stationary' if r.stationary else ''}. Typical goal: {r.goal}"
@@ -147,7 +148,7 @@ def role_messages(record: TaskRecord, catalogue: Sequence[SkillDocument]) -> lis
         "of this task and a one-sentence local goal for it. Answer with exactly one JSON "
         "object matching the JSON Schema below, and nothing else.\n\n"
         f"Task: {spec.name} ({spec.summary}).\nRoles:\n{roles}\n"
-        f"Played by the environment, not by our UAVs: {', '.join(spec.scripted) or 'none'}.\n"
+        f"Played by the environment, not by our UAVs: {', '.join(spec.scripted_names) or 'none'}.\n"
         f"Skills the UAVs will choose from:\n{skills}\n\nJSON Schema: {schema}"
     )
     record_json = record.model_dump_json(exclude={"text"})

@@ -7,15 +7,14 @@ participating UAVs are up, so it is passed as validation context::
 
     TaskRecord.model_validate(data, context={"roster": ["uav0", "uav1"]})
 
-The nine task types, their roles and role-count bounds live here too (``TASKS``), because the
-record's own validation depends on them.
+The task types, their roles and role-count bounds come from the task registry
+(``aeroweaver_edge.tasks``): one definition per task, which the simulator reads too.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from typing import Annotated, Any, Literal, get_args
+from collections.abc import Mapping, Sequence
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -28,275 +27,17 @@ from pydantic import (
     model_validator,
 )
 
-ARENA_HALF_M = 70.0  # the arena is north/east in [-70, 70] m around the local origin
-MAX_UAVS = 10  # at most 10 UAVs per task (notes/mpe-tasks.md)
+from aeroweaver_edge.defaults import ARENA_HALF_M, MAX_UAVS
+from aeroweaver_edge.tasks import TASK_NAMES, get_spec
+from aeroweaver_edge.tasks.spec import RoleSpec, TaskSpec
 
-TaskType = Literal[
-    "coverage",
-    "pursuit_evasion",
-    "guided_navigation",
-    "private_communication",
-    "circular_formation",
-    "line_formation",
-    "world_communication",
-    "collection_delivery",
-    "goal_concealment",
-]
-TASK_TYPES: tuple[str, ...] = get_args(TaskType)
-
-
-# --------------------------------------------------------------------------- task specs
-
-
-@dataclass(frozen=True)
-class RoleSpec:
-    """A role a UAV of this swarm may take, with bounds on how many UAVs take it."""
-
-    name: str
-    min_count: int
-    max_count: int | None  # None: unbounded
-    goal: str  # template local goal
-    stationary: bool = False  # stationary roles get only non-actuating skills plus hold
-
-
-@dataclass(frozen=True)
-class TaskSpec:
-    name: str
-    summary: str
-    roles: tuple[RoleSpec, ...]  # roles our UAVs play
-    scripted: tuple[str, ...]  # roles the environment plays (may appear in role_counts)
-    defaults: Callable[[int], dict[str, int]]  # template role counts for n UAVs
-    team_size: int  # UAVs used when the mission states no number (the note's default roles)
-
-    def role(self, name: str) -> RoleSpec:
-        return next(r for r in self.roles if r.name == name)
-
-    @property
-    def role_names(self) -> tuple[str, ...]:
-        return tuple(r.name for r in self.roles)
-
-    @property
-    def min_uavs(self) -> int:
-        return max(1, sum(r.min_count for r in self.roles))
-
-    @property
-    def max_uavs(self) -> int:
-        if any(r.max_count is None for r in self.roles):
-            return MAX_UAVS
-        return min(MAX_UAVS, sum(r.max_count or 0 for r in self.roles))
-
-    def describe_size(self) -> str:
-        lo, hi = self.min_uavs, self.max_uavs
-        roles = ", ".join(self.role_names)
-        if lo == hi:
-            return f"exactly {lo} UAVs ({roles})"
-        return f"{lo} to {hi} UAVs ({roles})"
-
-
-def _all(role: str) -> Callable[[int], dict[str, int]]:
-    return lambda n: {role: n}
-
-
-def _one_plus(first: str, rest: str) -> Callable[[int], dict[str, int]]:
-    return lambda n: {first: 1, rest: n - 1}
-
-
-def _collection(n: int) -> dict[str, int]:
-    # Two mobile deposits only when at least two collectors remain (the default: 2 + 2).
-    if n >= 4:
-        return {"collector": n - 2, "deposit_red": 1, "deposit_blue": 1}
-    return {"collector": n}
-
-
-TASKS: dict[str, TaskSpec] = {
-    s.name: s
-    for s in (
-        TaskSpec(
-            "coverage",
-            "cover every landmark with one UAV each",
-            (
-                RoleSpec(
-                    "searcher",
-                    1,
-                    None,
-                    "Reach a landmark no other drone is covering and stay within 3 m of it.",
-                ),
-            ),
-            (),
-            _all("searcher"),
-            3,
-        ),
-        TaskSpec(
-            "pursuit_evasion",
-            "pursuers catch an evading drone",
-            (
-                RoleSpec(
-                    "pursuer",
-                    1,
-                    None,
-                    "Close in on the evader with the other pursuers until "
-                    "at least two of you are within 6 m of it; share where it is.",
-                ),
-            ),
-            ("evader",),
-            _all("pursuer"),
-            3,
-        ),
-        TaskSpec(
-            "guided_navigation",
-            "a stationary speaker guides listeners to a goal landmark",
-            (
-                RoleSpec(
-                    "speaker",
-                    1,
-                    1,
-                    "Tell the listeners which landmark is the goal; stay where you are.",
-                    stationary=True,
-                ),
-                RoleSpec(
-                    "listener",
-                    1,
-                    None,
-                    "Follow the speaker's signal to the goal landmark and stop within 3 m of it.",
-                ),
-            ),
-            (),
-            _one_plus("speaker", "listener"),
-            2,
-        ),
-        TaskSpec(
-            "private_communication",
-            "a sender passes an encrypted symbol to a receiver past an eavesdropper",
-            (
-                RoleSpec(
-                    "sender",
-                    1,
-                    1,
-                    "Encrypt the private symbol with the shared key and send "
-                    "the ciphertext to the receiver; stay where you are.",
-                    stationary=True,
-                ),
-                RoleSpec(
-                    "receiver",
-                    1,
-                    1,
-                    "Decode the sender's ciphertext with the shared key and "
-                    "record the right symbol; stay where you are.",
-                    stationary=True,
-                ),
-            ),
-            ("eavesdropper",),
-            lambda n: {"sender": 1, "receiver": 1},
-            2,
-        ),
-        TaskSpec(
-            "circular_formation",
-            "members form a circle around a centre marker",
-            (
-                RoleSpec(
-                    "member",
-                    2,
-                    None,
-                    "Take your own slot on the circle around the centre "
-                    "marker and hold within 3 m of it.",
-                ),
-            ),
-            (),
-            _all("member"),
-            5,
-        ),
-        TaskSpec(
-            "line_formation",
-            "members form an evenly spaced line between two endpoints",
-            (
-                RoleSpec(
-                    "member",
-                    2,
-                    None,
-                    "Take your own slot on the line between the two "
-                    "endpoints and hold within 3 m of it.",
-                ),
-            ),
-            (),
-            _all("member"),
-            5,
-        ),
-        TaskSpec(
-            "world_communication",
-            "a leader signals foragers' positions to pursuers who catch them",
-            (
-                RoleSpec(
-                    "leader",
-                    1,
-                    1,
-                    "Spot foragers with your long-range sensor, signal their "
-                    "positions to the pursuers and chase the nearest one.",
-                ),
-                RoleSpec(
-                    "pursuer",
-                    0,
-                    None,
-                    "Catch foragers, following the leader's target "
-                    "messages when they are out of sight or hidden in a forest.",
-                ),
-            ),
-            ("forager",),
-            _one_plus("leader", "pursuer"),
-            3,
-        ),
-        TaskSpec(
-            "collection_delivery",
-            "collectors pick up treasures and deliver them to the matching deposit",
-            (
-                RoleSpec(
-                    "collector",
-                    1,
-                    None,
-                    "Pick up an available treasure and deliver it to "
-                    "the deposit of its colour; avoid crowding other collectors.",
-                ),
-                RoleSpec(
-                    "deposit_red",
-                    0,
-                    1,
-                    "Move toward collectors carrying red treasure to take their delivery.",
-                ),
-                RoleSpec(
-                    "deposit_blue",
-                    0,
-                    1,
-                    "Move toward collectors carrying blue treasure to take their delivery.",
-                ),
-            ),
-            (),
-            _collection,
-            4,
-        ),
-        TaskSpec(
-            "goal_concealment",
-            "informed UAVs reach the goal landmark without revealing it to an adversary",
-            (
-                RoleSpec(
-                    "informed",
-                    1,
-                    None,
-                    "Keep a drone on the goal landmark while others "
-                    "visit decoy landmarks so the adversary cannot tell which is the goal.",
-                ),
-            ),
-            ("adversary",),
-            _all("informed"),
-            2,
-        ),
-    )
-}
-assert tuple(TASKS) == TASK_TYPES
+TASK_TYPES: tuple[str, ...] = TASK_NAMES
 
 
 def task_roles(task: str) -> tuple[str, ...]:
     """Every role name of a task, ours first, then the scripted ones."""
-    spec = TASKS[task]
-    return (*spec.role_names, *spec.scripted)
+    spec = get_spec(task)
+    return (*spec.role_names, *spec.scripted_names)
 
 
 # --------------------------------------------------------------------------- regions
@@ -355,7 +96,9 @@ class TaskRecord(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    task: TaskType = Field(description="one of the nine task types")
+    task: str = Field(
+        description="one of the task types", json_schema_extra={"enum": list(TASK_NAMES)}
+    )
     uavs: tuple[str, ...] = Field(
         min_length=1, description="ids of the participating UAVs, a subset of the live roster"
     )
@@ -371,6 +114,13 @@ class TaskRecord(BaseModel):
     )
     text: str = Field(default="", description="the original mission text")
 
+    @field_validator("task")
+    @classmethod
+    def _known_task(cls, v: str) -> str:
+        if v not in TASK_NAMES:
+            raise ValueError(f"unknown task type {v!r} (known: {', '.join(TASK_NAMES)})")
+        return v
+
     @field_validator("uavs")
     @classmethod
     def _uavs_up_and_sized(cls, v: tuple[str, ...], info: ValidationInfo) -> tuple[str, ...]:
@@ -384,8 +134,8 @@ class TaskRecord(BaseModel):
                     f"{', '.join(down)} not in the live roster ({', '.join(roster) or 'empty'})"
                 )
         task = info.data.get("task")
-        if task in TASKS:
-            spec = TASKS[task]
+        if task in TASK_NAMES:
+            spec = get_spec(task)
             if not spec.min_uavs <= len(v) <= spec.max_uavs:
                 raise ValueError(f"{task} needs {spec.describe_size()}, got {len(v)}")
         return v
@@ -394,9 +144,9 @@ class TaskRecord(BaseModel):
     @classmethod
     def _roles_of_task(cls, v: dict[str, int], info: ValidationInfo) -> dict[str, int]:
         task = info.data.get("task")
-        if task not in TASKS:
+        if task not in TASK_NAMES:
             return v  # the task error is reported on its own field
-        spec = TASKS[task]
+        spec = get_spec(task)
         unknown = [r for r in v if r not in task_roles(task)]
         if unknown:
             raise ValueError(
@@ -454,7 +204,6 @@ def validation_summary(e: ValidationError) -> str:
 __all__ = [
     "ARENA_HALF_M",
     "MAX_UAVS",
-    "TASKS",
     "TASK_TYPES",
     "BoxRegion",
     "CircleRegion",
@@ -462,7 +211,6 @@ __all__ = [
     "RoleSpec",
     "TaskRecord",
     "TaskSpec",
-    "TaskType",
     "task_roles",
     "validation_summary",
 ]

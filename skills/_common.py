@@ -7,8 +7,11 @@ Conventions every executor here follows (the simulator tasks build observations 
   (``pursuer``, ``evader``, ``leader``, ``forager``, ``collector``, ``deposit_red``, ...).
 * Static objects: ``landmark``, ``food``, ``forest``, ``treasure`` (``role`` = colour, e.g.
   ``"red"``), ``slot`` (a formation slot), ``waypoint`` (a mission point of interest).
-* Private per-UAV facts arrive in ``obs.memo`` as strings: ``goal_landmark``,
-  ``private_symbol``, ``key``, ``slot``, ``cargo``. Skills record ``guess`` there.
+* Private per-UAV facts arrive in ``obs.facts`` (from the Perception port, fresh every
+  round, only what the UAV's role may know) as strings: ``goal_landmark``,
+  ``private_symbol``, ``key``, ``slot``, ``cargo``. ``obs.memo`` is the UAV's own record
+  across rounds: a skill that guesses puts ``guess`` in its intent's memo, and the daemon
+  sends that guess to the world in its command (the world scores it).
 * Message bodies are untrusted data: every field is type-checked before use.
 """
 
@@ -102,7 +105,7 @@ def latest_by_target(obs: Observation, kind: str) -> dict[str, InboxMessage]:
 
 
 def symbol(value: object) -> int | None:
-    """A private-communication symbol 0..3 from a memo string ("0".."3")."""
+    """A private-communication symbol 0..3 from a fact or memo string ("0".."3")."""
     return int(value) if isinstance(value, str) and value in _SYMBOL_TEXT else None
 
 

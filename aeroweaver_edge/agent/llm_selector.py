@@ -21,12 +21,12 @@ from dataclasses import replace
 from typing import Any
 
 from aeroweaver_edge.agent.prompt import PromptLimits, build_messages
-from aeroweaver_edge.agent.scoring import LabelScores
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
 from aeroweaver_edge.llm.logprobs import parse_label_scores
 from aeroweaver_edge.llm.probe import ProbeResult, classify_error, classify_response
 from aeroweaver_edge.ports import DecisionRequest
+from aeroweaver_edge.scores import LabelScores
 
 log = logging.getLogger(__name__)
 

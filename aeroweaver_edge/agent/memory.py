@@ -436,6 +436,7 @@ class ExperienceMemory:
 
     def append(
         self,
+        *,
         task: str,
         role: str,
         uav: str,
@@ -863,6 +864,7 @@ class AsyncExperienceMemory:
 
     async def append(
         self,
+        *,
         task: str,
         role: str,
         uav: str,
@@ -874,7 +876,16 @@ class AsyncExperienceMemory:
     ) -> bool:
         m = self._mem
         return await self._run(
-            lambda: m.append(task, role, uav, episode, round, state_text, skill, invocation)
+            lambda: m.append(
+                task=task,
+                role=role,
+                uav=uav,
+                episode=episode,
+                round=round,
+                state_text=state_text,
+                skill=skill,
+                invocation=invocation,
+            )
         )
 
     async def add_reward(

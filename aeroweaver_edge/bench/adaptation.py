@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.sim.swarm import SwarmOptions, run_swarm
+from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 
 
 async def run_conditions(

@@ -76,7 +76,16 @@ def fill(memory: ExperienceMemory, records: int, rng: random.Random) -> None:
                     break
                 text, options = _state(rng, uav, rnd)
                 inv = rng.choice(options)
-                memory.append(TASK, ROLE, uav, episode, rnd, text, inv.split("(")[0], inv)
+                memory.append(
+                    task=TASK,
+                    role=ROLE,
+                    uav=uav,
+                    episode=episode,
+                    round=rnd,
+                    state_text=text,
+                    skill=inv.split("(")[0],
+                    invocation=inv,
+                )
                 memory.add_reward(uav, episode, rnd, _reward(rng, inv), "bench")
                 done += 1
             memory.finalise(uav, episode)

@@ -1,4 +1,4 @@
-"""Micro-benchmark of the kinematic world and the coverage reward, for 3 UAVs.
+"""Micro-benchmark of the kinematic world and a task's rewards (coverage, 3 UAVs by default).
 
 ``python -m aeroweaver_edge.bench.world_speed`` prints one JSON line. Each figure is the
 median over batches of the per-call time in microseconds, so one slow batch (GC, a noisy
@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from aeroweaver_edge.sim.tasks.coverage import CoverageTask
+from aeroweaver_edge.tasks import create
 
 
 def per_call_us(fn: Callable[[], object], calls: int, batches: int) -> float:
@@ -35,9 +35,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--calls", type=int, default=2000, help="calls per batch")
     parser.add_argument("--batches", type=int, default=7)
     parser.add_argument("--uavs", type=int, default=3)
+    parser.add_argument("--task", default="coverage")
     args = parser.parse_args(argv)
 
-    task = CoverageTask(args.uavs)
+    task = create(args.task, args.uavs)
     world = task.build_world(np.random.default_rng(66001))
     for i, uav in enumerate(world.uav_ids):
         world.set_velocity(uav, (11.0 * math.cos(i), 11.0 * math.sin(i), 0.0))
@@ -49,10 +50,11 @@ def main(argv: list[str] | None = None) -> int:
     first = world.uav_ids[0]
     result = {
         "bench": "world_speed",
+        "task": args.task,
         "uavs": args.uavs,
         "world_step_us": per_call_us(world.step, args.calls, args.batches),
         "reward_eval_us": per_call_us(lambda: task.rewards(world), args.calls, args.batches),
-        "complete_us": per_call_us(lambda: task.complete(world), args.calls, args.batches),
+        "complete_us": per_call_us(lambda: task.complete(world, 1), args.calls, args.batches),
         "sense_us": per_call_us(lambda: world.sense(first), args.calls, args.batches),
         "first_reward_incl_mpe2_import_s": round(first_reward_s, 4),
         "ticks_per_step": world.ticks // max(1, args.calls * args.batches),

@@ -1,9 +1,17 @@
 """The world side of a simulated swarm: lockstep rounds over Zenoh.
 
-Each round the runner sends every present UAV its frozen perception, waits for each UAV's
-command until the deadline (the world stays frozen meanwhile), applies them (a missing or
-held command holds that UAV), advances 0.5 s, scores the round and sends the rewards. A UAV
-whose liveliness token disappears is marked absent and holds for the rest of the run.
+Each round the runner lets the task's own agents decide on the frozen state (the evader,
+the foragers, the eavesdropper, the concealment adversary), sends every present UAV its
+frozen perception (what it senses within its role's radius, its private facts, and the
+messages that reach it from last round), waits for each UAV's command until the deadline
+(the world stays frozen meanwhile), applies them (a missing or held command holds that UAV;
+a guess is recorded by the task), advances 0.5 s, scores the round and sends the rewards. A
+UAV whose liveliness token disappears is marked absent and holds for the rest of the run.
+
+Which messages reach whom is computed here with the task's routing rule on the positions of
+the round they were sent, exactly as each receiver's inbox judges them, so every recipient
+waits for precisely the messages it will accept. World-flown agents that listen (the
+eavesdropper) get a listen-only peer link on the world's mesh.
 """
 
 from __future__ import annotations
@@ -20,11 +28,15 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from aeroweaver_edge.config import SimConfig
+from aeroweaver_edge.defaults import COMM_RADIUS_M
+from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
-from aeroweaver_edge.sim.tasks.base import Task
+from aeroweaver_edge.tasks.base import TaskDefinition
 from aeroweaver_edge.wire import (
+    BROADCAST,
     HeaderFactory,
+    InboxMessage,
     Keys,
     MsgRef,
     SimCommand,
@@ -37,6 +49,7 @@ from aeroweaver_edge.wire import (
 
 if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.peers import PeerLink
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +63,8 @@ class RoundLog:
     missed: tuple[str, ...]  # present UAVs whose command did not arrive in time
     absent: tuple[str, ...]
     wait_s: float
+    deliveries: int = 0  # (message, recipient) pairs that reach, of this round's messages
+    wall_s: float = 0.0  # the whole round in the world: perceptions to rewards
 
 
 @dataclass
@@ -65,12 +80,14 @@ class WorldRunner:
         self,
         mesh: Mesh,
         swarm: str,
-        task: Task,
+        task: TaskDefinition,
         cfg: SimConfig,
         *,
         on_round: Callable[[RoundLog], Awaitable[None]] | None = None,
+        comm_radius_m: float = COMM_RADIUS_M,
     ) -> None:
         self.mesh = mesh
+        self.comm_radius_m = comm_radius_m
         self.keys = Keys(swarm)
         self.task = task
         self.cfg = cfg
@@ -83,8 +100,23 @@ class WorldRunner:
         self._tasks: list[asyncio.Task[None]] = []
         self._where: tuple[int, int] = (-1, -1)
         self._finished = False
+        self._listeners: dict[str, PeerLink] = {}
 
     async def start(self) -> None:
+        from aeroweaver_edge.peers import PeerLink
+
+        for body in self.task.scripted_listeners:
+            link = PeerLink(
+                self.mesh,
+                self.keys,
+                body,
+                HeaderFactory(body),
+                self.comm_radius_m,
+                announce=False,
+            )
+            link.set_routing(self.task.role_of(body), self._reach)
+            await link.start()
+            self._listeners[body] = link
         self._tasks = [
             asyncio.create_task(self._pump_commands(), name="world-commands"),
             asyncio.create_task(self._pump_liveliness(), name="world-liveliness"),
@@ -92,6 +124,9 @@ class WorldRunner:
 
     async def aclose(self) -> None:
         await cancel_all(self._tasks)
+        for link in self._listeners.values():
+            await link.aclose()
+        self._listeners.clear()
 
     async def _pump_commands(self) -> None:
         async for key, cmd in self.mesh.subscribe(self.keys.sim_command("*"), SimCommand):
@@ -152,19 +187,51 @@ class WorldRunner:
                     await self._changed.wait()
         return self._commands.pop(key, {}), time.monotonic() - started
 
+    def _reach(self, sender_role: str, receiver_role: str, distance_m: float) -> bool:
+        return self.task.spec.reaches(sender_role, receiver_role, distance_m, self.comm_radius_m)
+
+    def _recipients(self, world: KinematicWorld, sender: str, ref: MsgRef) -> list[str]:
+        """Who a message ``sender`` sent this round reaches: the bodies that listen (present
+        UAVs and listening world agents) the routing rule lets it reach, now."""
+        if ref.to == BROADCAST:
+            pool = [b for b in world.uav_ids if b != sender]
+        else:
+            pool = [ref.to] if ref.to in world.uav_ids and ref.to != sender else []
+        return [
+            b
+            for b in pool
+            if (b in self._listeners or (b in self.alive and not self.task.is_scripted(b)))
+            and self.task.reaches(sender, b, world, self.comm_radius_m)
+        ]
+
+    async def _hear(
+        self, rnd: int, world: KinematicWorld, expect: dict[str, list[MsgRef]]
+    ) -> dict[str, list[InboxMessage]]:
+        """What the listening world agents received last round (their own position noted)."""
+        heard: dict[str, list[InboxMessage]] = {}
+        for body, link in self._listeners.items():
+            link.inbox.note_position(rnd, world.body(body).pos)
+            heard[body] = await link.collect_inbox(
+                expect=expect.get(body, []), timeout_s=self.cfg.deadline_s, max_round=rnd - 1
+            )
+        return heard
+
     async def run_episode(self, episode: int) -> EpisodeResult:
         rng = np.random.default_rng(self.cfg.seed + episode)
         world = self.task.build_world(rng, self.cfg)
         ep = Episode(self.task, world, self.cfg.max_rounds)
         self._publish_episode(episode, "start")
-        inbox: dict[str, list[MsgRef]] = defaultdict(list)
+        expect: dict[str, list[MsgRef]] = defaultdict(list)
+        controlled = self.task.uav_ids
         while not ep.done:
+            round_started = time.monotonic()
             rnd = ep.round
             self._where = (episode, rnd)
-            present = [u for u in world.uav_ids if u in self.alive]
-            for uav in world.uav_ids:
+            present = [u for u in controlled if u in self.alive]
+            for uav in controlled:
                 if uav not in self.alive:
                     world.mark_absent(uav)
+            scripted = ep.scripted(await self._hear(rnd, world, expect))
             for uav in present:
                 body = world.body(uav)
                 self.mesh.put(
@@ -178,25 +245,31 @@ class WorldRunner:
                         pos=body.pos,
                         vel=body.vel,
                         entities=self.task.visible(world, uav),
-                        expected_inbox=inbox.pop(uav, []),
+                        expected_inbox=expect.get(uav, []),
+                        facts=self.task.private_facts(world, uav),
                     ),
                     block=True,
                 )
-            inbox.clear()
             commands, waited = await self._collect((episode, rnd), set(present))
             missed = tuple(u for u in present if u not in commands)
             self.stats.deadline_misses += len(missed)
             self.stats.commands += len(commands)
-            orders: dict[str, Vec3 | None] = {u: None for u in world.uav_ids}
+            expect = defaultdict(list)
+            orders: dict[str, Vec3 | None] = {u: None for u in controlled}
+            guesses: dict[str, str] = {}
             for uav, cmd in commands.items():
-                if uav in orders:
-                    orders[uav] = None if cmd.held else cmd.vel
+                if uav not in orders:
+                    continue
+                orders[uav] = None if cmd.held else cmd.vel
+                if cmd.guess is not None:
+                    guesses[uav] = cmd.guess
                 for ref in cmd.sent:
-                    if ref.to:
-                        inbox[ref.to].append(ref)
-            ep.apply(orders)
+                    for to in self._recipients(world, uav, ref):
+                        expect[to].append(ref)
+            ep.apply_actions(scripted)
+            ep.apply(orders, guesses)
             res = ep.advance()
-            for uav in world.uav_ids:
+            for uav in controlled:
                 self.mesh.put(
                     self.keys.sim_reward(uav),
                     SimReward(
@@ -211,8 +284,20 @@ class WorldRunner:
                     block=True,
                 )
             if self._on_round is not None:
-                absent = tuple(u for u in world.uav_ids if u not in self.alive)
-                await self._on_round(RoundLog(episode, rnd, res, commands, missed, absent, waited))
+                absent = tuple(u for u in controlled if u not in self.alive)
+                await self._on_round(
+                    RoundLog(
+                        episode=episode,
+                        round=rnd,
+                        result=res,
+                        commands=commands,
+                        missed=missed,
+                        absent=absent,
+                        wait_s=waited,
+                        deliveries=sum(len(v) for v in expect.values()),
+                        wall_s=time.monotonic() - round_started,
+                    )
+                )
         result = ep.result()
         self._publish_episode(episode, "end", result.reason)
         return result

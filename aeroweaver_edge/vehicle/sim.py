@@ -1,9 +1,10 @@
 """The simulator backend: Vehicle, Clock, Perception and RewardSource ports served by the
 kinematic world over Zenoh, in lockstep.
 
-The world sends each UAV its frozen perception (the round trigger); the UAV answers with
-one gated velocity setpoint and the list of peer messages it sent, so the world can tell
-each recipient what to wait for next round. A UAV that misses the world's deadline holds.
+The world sends each UAV its frozen perception (the round trigger, what it senses and its
+private facts); the UAV answers with one gated velocity setpoint, the list of peer messages
+it sent (so the world can tell each recipient what to wait for next round) and its guess,
+if a skill recorded one. A UAV that misses the world's deadline holds.
 """
 
 from __future__ import annotations
@@ -15,9 +16,8 @@ from typing import TYPE_CHECKING
 
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.observation import VehicleState
-from aeroweaver_edge.ports import Health, RewardEvent, RoundTick
+from aeroweaver_edge.ports import Health, Percept, RewardEvent, RoundTick
 from aeroweaver_edge.wire import (
-    Entity,
     HeaderFactory,
     Keys,
     MsgRef,
@@ -107,7 +107,9 @@ class SimLink:
         self._setpoint, self._held = ZERO, True
         return RoundTick(msg.episode, msg.round, msg.deadline_s, tuple(msg.expected_inbox))
 
-    async def finish(self, tick: RoundTick, sent: Sequence[MsgRef]) -> None:
+    async def finish(
+        self, tick: RoundTick, *, sent: Sequence[MsgRef], guess: str | None = None
+    ) -> None:
         self._last_played = (tick.episode, tick.round)
         self._mesh.put(
             self._keys.sim_command(self.uav),
@@ -119,14 +121,15 @@ class SimLink:
                 vel=self._setpoint,
                 held=self._held,
                 sent=list(sent),
+                guess=guess,
             ),
             block=True,
         )
 
     # Perception
-    async def sense(self, tick: RoundTick) -> tuple[VehicleState, Sequence[Entity]]:
+    async def sense(self, tick: RoundTick) -> Percept:
         msg = self._require()
-        return VehicleState(msg.pos, msg.vel), msg.entities
+        return Percept(VehicleState(msg.pos, msg.vel), msg.entities, msg.facts)
 
     # RewardSource
     def drain(self) -> list[RewardEvent]:

@@ -1,5 +1,5 @@
 """approach_decoy: an informed agent flies to a visible landmark that is NOT the goal,
-to mislead the adversary. Needs ``obs.memo["goal_landmark"]`` to know what to avoid."""
+to mislead the adversary. Needs ``obs.facts["goal_landmark"]`` to know what to avoid."""
 
 from __future__ import annotations
 
@@ -18,14 +18,14 @@ class Params(SkillParams):
 
 
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
-    goal = obs.memo.get("goal_landmark", "")
+    goal = obs.facts.get("goal_landmark", "")
     if not goal or not allowed(ctx, ROLES):
         return []
     return [Params(target_id=e.id) for e in of_kind(obs, "landmark") if e.id != goal]
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
-    goal = obs.memo.get("goal_landmark", "")
+    goal = obs.facts.get("goal_landmark", "")
     landmark = visible(obs, params.target_id, "landmark")
     if landmark is None or not goal or landmark.id == goal or not allowed(ctx, ROLES):
         return HOLD

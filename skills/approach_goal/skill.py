@@ -1,5 +1,5 @@
 """approach_goal: an informed agent flies to the private goal landmark
-(``obs.memo["goal_landmark"]``)."""
+(``obs.facts["goal_landmark"]``)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ class Params(SkillParams):
 
 
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
-    goal = obs.memo.get("goal_landmark", "")
+    goal = obs.facts.get("goal_landmark", "")
     if not usable_id(goal) or not allowed(ctx, ROLES) or visible(obs, goal, "landmark") is None:
         return []
     return [Params(target_id=goal)]
@@ -26,7 +26,7 @@ def options(obs: Observation, ctx: SkillContext) -> list[Params]:
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     landmark = visible(obs, params.target_id, "landmark")
-    is_goal = params.target_id == obs.memo.get("goal_landmark")
+    is_goal = params.target_id == obs.facts.get("goal_landmark")
     if landmark is None or not is_goal or not allowed(ctx, ROLES):
         return HOLD
     return move_and_announce(NAME, landmark.id, landmark.pos[0], landmark.pos[1], ctx)

@@ -1,7 +1,7 @@
 """collect_treasure: an empty collector flies to a visible treasure to pick it up.
 
 Treasures are entities of kind ``"treasure"`` whose ``role`` is their colour (type). The
-simulator performs the pickup (within 3 m) and reports the load in ``obs.memo["cargo"]``
+simulator performs the pickup (on contact, about 5 m) and reports the load in ``obs.facts["cargo"]``
 (the colour, or empty); this executor never claims a pickup itself.
 """
 
@@ -22,7 +22,7 @@ class Params(SkillParams):
 
 
 def _empty(obs: Observation) -> bool:
-    return not obs.memo.get("cargo")
+    return not obs.facts.get("cargo")
 
 
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:

@@ -1,5 +1,5 @@
 """decode_message: the stationary receiver decrypts a received ciphertext with its key
-(``obs.memo["key"]``) and records the plaintext as its guess (memo ``guess``)."""
+(``obs.facts["key"]``) and records the plaintext as its guess (memo ``guess``)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ class Params(SkillParams):
 
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     """One option per distinct received ciphertext, already decrypted with the key."""
-    key = symbol(obs.memo.get("key"))
+    key = symbol(obs.facts.get("key"))
     if key is None or not allowed(ctx, ROLES):
         return []
     decoded = dict.fromkeys(c ^ key for c in ciphertexts(obs))

@@ -1,7 +1,7 @@
 """deliver_treasure: a loaded collector flies to the deposit that accepts its cargo.
 
 Deposits are UAVs (kind ``"uav"``) with role ``deposit_<colour>``; the collector's load is
-``obs.memo["cargo"]`` (a colour, set by the simulator). The simulator performs the delivery.
+``obs.facts["cargo"]`` (a colour, set by the simulator). The simulator performs the delivery.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ class Params(SkillParams):
 
 
 def _deposit_role(obs: Observation) -> str | None:
-    cargo = obs.memo.get("cargo", "")
+    cargo = obs.facts.get("cargo", "")
     return f"deposit_{cargo}" if cargo else None
 
 
@@ -37,5 +37,5 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     deposit = None if role is None else visible(obs, params.target_id, "uav", {role})
     if deposit is None or not allowed(ctx, ROLES):
         return HOLD
-    cargo = obs.memo["cargo"]
+    cargo = obs.facts["cargo"]
     return move_and_announce(NAME, deposit.id, deposit.pos[0], deposit.pos[1], ctx, cargo=cargo)

@@ -1,6 +1,6 @@
 """encode_message: the stationary sender sends ``ciphertext = plaintext XOR key``.
 
-Private facts (strings in ``obs.memo``): ``private_symbol`` (the plaintext, "0".."3") and
+Private facts (strings in ``obs.facts``): ``private_symbol`` (the plaintext, "0".."3") and
 ``key`` ("0".."3", shared with the receiver only). The plaintext never leaves the UAV.
 """
 
@@ -22,14 +22,14 @@ class Params(SkillParams):
 
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     """Only the sender's own private symbol, and only when it holds a key to encrypt with."""
-    plain, key = symbol(obs.memo.get("private_symbol")), symbol(obs.memo.get("key"))
+    plain, key = symbol(obs.facts.get("private_symbol")), symbol(obs.facts.get("key"))
     if plain is None or key is None or not allowed(ctx, ROLES):
         return []
     return [Params(symbol=plain)]
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
-    key = symbol(obs.memo.get("key"))
+    key = symbol(obs.facts.get("key"))
     if key is None or not allowed(ctx, ROLES):
         return HOLD
     body: dict[str, Scalar] = {"skill": NAME, "ciphertext": params.symbol ^ key}

@@ -1,6 +1,6 @@
 """signal_goal: the stationary speaker tells listeners which landmark is the goal.
 
-The goal is private: ``obs.memo["goal_landmark"]`` (a landmark id) is set for the speaker
+The goal is private: ``obs.facts["goal_landmark"]`` (a landmark id) is set for the speaker
 only. The message carries the landmark's position as well when the speaker can see it.
 """
 
@@ -21,13 +21,13 @@ class Params(SkillParams):
 
 
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
-    goal = obs.memo.get("goal_landmark", "")
+    goal = obs.facts.get("goal_landmark", "")
     return [Params(target_id=goal)] if usable_id(goal) and allowed(ctx, ROLES) else []
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     """Stay put and send a ``goal`` message; only the true goal is ever signalled."""
-    if params.target_id != obs.memo.get("goal_landmark") or not allowed(ctx, ROLES):
+    if params.target_id != obs.facts.get("goal_landmark") or not allowed(ctx, ROLES):
         return HOLD
     body: dict[str, Scalar] = {"skill": NAME, "target_id": params.target_id}
     landmark = visible(obs, params.target_id, "landmark")

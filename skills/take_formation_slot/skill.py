@@ -1,7 +1,7 @@
 """take_formation_slot: fly to a formation slot (circle or line).
 
 Slots are entities of kind ``"slot"``. A member that owns a slot has its id in
-``obs.memo["slot"]`` and is offered that slot only; without an owned slot every visible
+``obs.facts["slot"]`` and is offered that slot only; without an owned slot every visible
 slot is offered (the members then share them out through their ``intent`` messages).
 """
 
@@ -24,7 +24,7 @@ class Params(SkillParams):
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     if not allowed(ctx, ROLES):
         return []
-    own = obs.memo.get("slot", "")
+    own = obs.facts.get("slot", "")
     slots = of_kind(obs, "slot")
     return [Params(target_id=s.id) for s in slots if not own or s.id == own]
 

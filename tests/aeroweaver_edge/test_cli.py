@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.cli import build_parser, main
+from aeroweaver_edge.tasks import TASK_NAMES
 
 
 def aeroweaver() -> list[str]:
@@ -97,4 +98,39 @@ def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]
 
 def test_sim_defaults_match_the_paper_horizon() -> None:
     args = build_parser().parse_args(["sim"])
-    assert (args.task, args.rounds, args.selector) == ("coverage", 24, "llm")
+    # No task: coverage, unless a --mission names another (the plan decides).
+    assert (args.task, args.uavs, args.rounds, args.selector) == (None, None, 24, "llm")
+
+
+@pytest.mark.parametrize("task", TASK_NAMES)
+def test_sim_accepts_every_task_name(task: str) -> None:
+    assert build_parser().parse_args(["sim", task, "--uavs", "50"]).task == task
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["sim", "coverage", "--uavs", "51"], "must be 1..50 UAVs, got 51"),
+        (["sim", "coverage", "--uavs", "0"], "must be 1..50 UAVs, got 0"),
+        (["sim", "coverage", "--uavs", "many"], "not a number of UAVs"),
+        (["sim", "search_and_rescue"], "invalid choice: 'search_and_rescue'"),
+    ],
+)
+def test_bad_sim_arguments_exit_2_with_one_line(
+    capsys: pytest.CaptureFixture[str], argv: list[str], words: str
+) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert words in err
+    assert "Traceback" not in err
+
+
+def test_a_size_the_task_does_not_take_exits_2_without_traceback(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["sim", "private_communication", "--uavs", "5", "--selector", "scripted"]) == 2
+    err = capsys.readouterr().err
+    assert "private_communication needs exactly 2 UAVs (sender, receiver), got 5" in err
+    assert "Traceback" not in err

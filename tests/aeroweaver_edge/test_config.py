@@ -243,6 +243,7 @@ def test_explicit_index_wins() -> None:
 def test_sim_config_bounds() -> None:
     assert SimConfig().deadline_s == 30.0
     with pytest.raises(ValueError, match="uavs"):
-        SimConfig(uavs=11)
+        SimConfig(uavs=51)
+    assert SimConfig(uavs=50).uavs == 50
     with pytest.raises(ValueError, match="max_rounds"):
         SimConfig(max_rounds=0)

@@ -23,13 +23,15 @@ from aeroweaver_edge.wire import (
     ProgressReport,
 )
 from commander.commander import Commander
-from commander.plan import COVERAGE_SKILLS, MissionPlan, template_plan
+from commander.harness import plan_for_task
+from commander.plan import MissionPlan
 from tests.helpers.zenoh_net import ZenohNet, eventually
 
 SWARM = "cmdtest"
 KEYS = Keys(SWARM)
 UAVS = ["uav0", "uav1"]
-PLAN = template_plan("coverage", UAVS, "m1")
+PLAN = plan_for_task("coverage", UAVS, mission_id="m1")
+COVERAGE_SKILLS = PLAN.assignments[UAVS[0]].skills
 T = TypeVar("T", bound=msgspec.Struct)
 
 
@@ -153,7 +155,7 @@ async def test_a_uav_dropped_from_the_plan_is_told_to_hold(zenoh_net: ZenohNet) 
     catch up on, its old role: it is served a hold-only release instead."""
     cmdr = await start_commander(zenoh_net)
     cmdr.publish(PLAN)
-    cmdr.publish(template_plan("coverage", ["uav0"], "m1"))
+    cmdr.publish(plan_for_task("coverage", ["uav0"], mission_id="m1"))
 
     late = await zenoh_net.open("uav1")
     assert len(await get_until(late, KEYS.assign("uav0"), Assignment, 1)) == 1  # routes up
@@ -179,7 +181,7 @@ async def test_commander_writes_only_under_its_own_keys(zenoh_net: ZenohNet) -> 
 
     # Phase 1: only the Commander is writing. Publish, republish with another plan.
     cmdr.publish(PLAN)
-    three = template_plan("coverage", [*UAVS, "uav2"], "m2")
+    three = plan_for_task("coverage", [*UAVS, "uav2"], mission_id="m2")
     cmdr.publish(three)
     assert await eventually(lambda: len(spy.samples) >= 3 + 4, 3.0)
     phase1 = spy.decoded()
@@ -231,8 +233,8 @@ async def test_commander_writes_only_under_its_own_keys(zenoh_net: ZenohNet) -> 
     }
 
 
-def test_template_plan_is_what_the_swarm_flies() -> None:
-    plan: MissionPlan = template_plan("coverage", UAVS, "m9", "custom text")
+def test_task_plan_is_what_the_swarm_flies() -> None:
+    plan: MissionPlan = plan_for_task("coverage", UAVS, mission_id="m9")
     assert plan.participants == UAVS
-    assert plan.text == "custom text"
+    assert plan.text.startswith("Cover every landmark")
     assert all(a.skills[-1] == "hold_position" for a in plan.assignments.values())

@@ -1,16 +1,17 @@
 from __future__ import annotations
 
 import json
+from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
 import pytest
 
 from aeroweaver_edge.skills import SkillRegistry
-from commander.activation import HOLD
-from commander.harness import plan_mission
+from aeroweaver_edge.tasks import TASK_NAMES, get_spec
+from commander.activation import DEFAULT_K, HOLD, condition_roles
+from commander.harness import plan_for_task, plan_mission
 from commander.mission_parser import MissionParseError
-from commander.plan import COVERAGE_SKILLS, template_plan
 
 ROSTER3 = ["uav0", "uav1", "uav2"]
 LLM = Callable[..., Any]
@@ -106,8 +107,29 @@ async def test_unparsable_mission_raises(registry: SkillRegistry) -> None:
         await plan_mission("Cover the landmarks with 5 drones.", ROSTER3, registry, None)
 
 
-def test_template_plan_still_works() -> None:
-    plan = template_plan("coverage", ROSTER3, "m1")
-    assert plan.assignments["uav0"].skills == COVERAGE_SKILLS
-    assert plan.record is None
-    assert plan.parse_source == "template"
+@pytest.mark.parametrize("task", TASK_NAMES)
+def test_a_plan_from_the_task_name_activates_per_role_without_llm(
+    task: str, registry: SkillRegistry
+) -> None:
+    """``aeroweaver sim <task>``: record from the task name, template roles, top-K
+    retrieval; every role gets at least one of its own skills, stationary roles only theirs."""
+    spec = get_spec(task)
+    uavs = [f"uav{i}" for i in range(spec.team_size)]
+    plan = plan_for_task(task, uavs, registry, mission_id="m1")
+    assert plan.record is not None
+    assert plan.record.task == task
+    assert plan.text == spec.mission_text
+    assert (plan.parse_source, plan.roles_source, plan.setup_tokens) == ("template", "template", 0)
+    assert plan.participants == uavs
+    counts = spec.role_counts(len(uavs))
+    assert Counter(a.role for a in plan.assignments.values()) == +Counter(counts)
+    for a in plan.assignments.values():
+        assert a.skills[-1] == "hold_position"
+        assert len(a.skills) <= DEFAULT_K + 1
+        active = [s for s in a.skills if s != HOLD]
+        assert active, f"{task}/{a.role} got no task skill"
+        for s in active:
+            roles = condition_roles(registry.get(s).doc.conditions)
+            assert roles is None or a.role in roles, f"{task}/{a.role} got {s}"
+            if spec.role(a.role).stationary:
+                assert roles is not None, f"stationary {a.role} got the open skill {s}"

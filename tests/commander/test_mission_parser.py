@@ -167,7 +167,7 @@ def test_constraints_are_kept() -> None:
             ROSTER3,
             "the mission names uav7 but only these are up: uav0, uav1, uav2",
         ),
-        ("Form a circle.", ["uav0"], "circular_formation needs 2 to 10 UAVs"),
+        ("Form a circle.", ["uav0"], "circular_formation needs 2 to 50 UAVs"),
         (
             "Form a ring or a row.",
             ROSTER3,

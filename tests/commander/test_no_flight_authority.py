@@ -9,8 +9,8 @@ import pytest
 
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
+from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 from aeroweaver_edge.sim.runner import RoundLog
-from aeroweaver_edge.sim.swarm import SwarmOptions, run_swarm
 from commander.plan import MissionPlan, UavAssignment
 from commander.progress import ProgressBoard
 

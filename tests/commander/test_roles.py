@@ -7,14 +7,15 @@ from typing import Any
 
 import pytest
 
+from aeroweaver_edge.tasks import specs
 from commander.roles import RoleError, RolePlan, assign_roles, check_roles, template_roles
-from commander.task_record import TASKS, TaskRecord
+from commander.task_record import TaskRecord
 
 ROSTER = [f"uav{i}" for i in range(10)]
 
 
 def _record(task: str, n: int | None = None, **kw: Any) -> TaskRecord:
-    n = TASKS[task].team_size if n is None else n
+    n = specs()[task].team_size if n is None else n
     return TaskRecord.model_validate(
         {"task": task, "uavs": ROSTER[:n], "text": "mission", **kw}, context={"roster": ROSTER}
     )
@@ -33,12 +34,12 @@ DEFAULTS = {
 }
 
 
-@pytest.mark.parametrize("task", list(TASKS))
+@pytest.mark.parametrize("task", list(specs()))
 def test_templates_match_the_default_roles_table(task: str) -> None:
     roles = template_roles(_record(task))
     assert Counter(a.role for a in roles.values()) == DEFAULTS[task]
     assert all(a.local_goal.endswith(".") for a in roles.values())
-    spec = TASKS[task]
+    spec = specs()[task]
     assert all(a.local_goal.startswith(spec.role(a.role).goal) for a in roles.values())
 
 

@@ -5,7 +5,8 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from commander.task_record import TASK_TYPES, TASKS, TaskRecord, validation_summary
+from aeroweaver_edge.tasks import specs
+from commander.task_record import TASK_TYPES, TaskRecord, validation_summary
 
 ROSTER = ["uav0", "uav1", "uav2", "uav3"]
 
@@ -23,9 +24,9 @@ def _error(**data: Any) -> str:
 
 def test_nine_tasks_with_roles() -> None:
     assert len(TASK_TYPES) == 9
-    assert set(TASKS) == set(TASK_TYPES)
-    assert TASKS["world_communication"].role_names == ("leader", "pursuer")
-    assert TASKS["pursuit_evasion"].scripted == ("evader",)
+    assert set(specs()) == set(TASK_TYPES)
+    assert specs()["world_communication"].role_names == ("leader", "pursuer")
+    assert specs()["pursuit_evasion"].scripted_names == ("evader",)
 
 
 def test_valid_record_with_region() -> None:
@@ -43,7 +44,7 @@ def test_valid_record_with_region() -> None:
 @pytest.mark.parametrize(
     ("data", "field", "words"),
     [
-        ({"task": "search_and_rescue"}, "task", "Input should be"),
+        ({"task": "search_and_rescue"}, "task", "unknown task type"),
         ({"uavs": ["uav0", "uav9"]}, "uavs", "uav9 not in the live roster"),
         ({"uavs": ["uav0", "uav0"]}, "uavs", "duplicate"),
         ({"uavs": []}, "uavs", "at least 1"),
@@ -81,7 +82,7 @@ def test_task_size_bounds() -> None:
     assert "field 'uavs'" in msg
     assert "exactly 2 UAVs (sender, receiver)" in msg
     msg = _error(task="guided_navigation", uavs=["uav0"])
-    assert "2 to 10 UAVs" in msg
+    assert "2 to 50 UAVs" in msg
 
 
 def test_scripted_roles_may_be_counted_but_do_not_take_uavs() -> None:

@@ -2,7 +2,7 @@
 
 Conventions under test (skills/_common.py): agents are entities of kind ``uav`` told apart
 by ``role``; static objects are ``landmark``, ``food``, ``forest``, ``treasure`` (role =
-colour), ``slot`` and ``waypoint``; private facts come in ``obs.memo`` (``goal_landmark``,
+colour), ``slot`` and ``waypoint``; private facts come in ``obs.facts`` (``goal_landmark``,
 ``private_symbol``, ``key``, ``slot``, ``cargo``) and guesses are recorded as ``guess``.
 """
 
@@ -57,7 +57,7 @@ def reg() -> SkillRegistry:
 def obs(
     *entities: Entity,
     messages: tuple[InboxMessage, ...] = (),
-    memo: dict[str, str] | None = None,
+    facts: dict[str, str] | None = None,
     own: tuple[float, float, float] = OWN,
     in_air: bool = True,
     round_: int = 3,
@@ -70,7 +70,7 @@ def obs(
         own=state,
         entities=entities,
         messages=messages,
-        memo=dict(memo or {}),
+        facts=dict(facts or {}),
     )
 
 
@@ -188,20 +188,20 @@ ROLE_CASES: list[tuple[str, str, Observation]] = [
     ("follow_peer", "pursuer", obs(messages=(TARGET_MSG,))),
     ("evade_peer", "evader", obs(PURSUER)),
     ("evade_peer", "forager", obs(LEADER)),
-    ("signal_goal", "speaker", obs(memo=GOAL_L1)),
+    ("signal_goal", "speaker", obs(facts=GOAL_L1)),
     ("follow_signal", "listener", obs(messages=(GOAL_MSG,))),
-    ("encode_message", "sender", obs(memo={"private_symbol": "2", "key": "3"})),
-    ("decode_message", "receiver", obs(messages=(CIPHER_MSG,), memo={"key": "3"})),
+    ("encode_message", "sender", obs(facts={"private_symbol": "2", "key": "3"})),
+    ("decode_message", "receiver", obs(messages=(CIPHER_MSG,), facts={"key": "3"})),
     ("guess_message", "eavesdropper", obs(messages=(CIPHER_MSG,))),
     ("take_formation_slot", "member", obs(SLOT0)),
     ("signal_target", "leader", obs(FORAGER)),
     ("seek_food", "forager", obs(FOOD)),
     ("seek_cover", "forager", obs(FOREST)),
     ("collect_treasure", "collector", obs(T_RED)),
-    ("deliver_treasure", "collector", obs(DEP_RED, memo={"cargo": "red"})),
+    ("deliver_treasure", "collector", obs(DEP_RED, facts={"cargo": "red"})),
     ("meet_collector", "deposit_red", obs(COLLECTOR, messages=(CARGO_MSG,))),
-    ("approach_goal", "informed", obs(L0, L1, memo=GOAL_L1)),
-    ("approach_decoy", "informed", obs(L0, L1, memo=GOAL_L1)),
+    ("approach_goal", "informed", obs(L0, L1, facts=GOAL_L1)),
+    ("approach_decoy", "informed", obs(L0, L1, facts=GOAL_L1)),
     ("infer_goal", "adversary", obs(L0, L1)),
 ]
 
@@ -264,8 +264,8 @@ def test_missing_target_holds(
 ) -> None:
     memo = {"goal_landmark": "L1", "cargo": "red" if name == "deliver_treasure" else ""}
     skill = reg.get(name)
-    assert run(skill, obs(memo=memo), ctx(role), **params) == HOLD
-    assert skill.options(obs(memo=memo), ctx(role)) == []
+    assert run(skill, obs(facts=memo), ctx(role), **params) == HOLD
+    assert skill.options(obs(facts=memo), ctx(role)) == []
 
 
 @pytest.mark.parametrize(
@@ -403,7 +403,7 @@ def test_evade_peer_with_the_threat_on_top_flees_toward_the_centre(reg: SkillReg
 
 def test_signal_goal_offers_only_the_private_goal_and_stays_put(reg: SkillRegistry) -> None:
     skill = reg.get("signal_goal")
-    o = obs(L0, L1, memo={"goal_landmark": "L1"})
+    o = obs(L0, L1, facts={"goal_landmark": "L1"})
     assert invocations(skill, o, ctx("speaker")) == ["signal_goal(target_id=L1)"]
     intent = run(skill, o, ctx("speaker"), target_id="L1")
     assert intent.motion == Hold()
@@ -420,7 +420,7 @@ def test_signal_goal_offers_only_the_private_goal_and_stays_put(reg: SkillRegist
 def test_signal_goal_without_seeing_the_landmark_names_it_only(reg: SkillRegistry) -> None:
     skill = reg.get("signal_goal")
     [message] = run(
-        skill, obs(memo={"goal_landmark": "L2"}), ctx("speaker"), target_id="L2"
+        skill, obs(facts={"goal_landmark": "L2"}), ctx("speaker"), target_id="L2"
     ).messages
     assert message.body == {"skill": "signal_goal", "target_id": "L2"}
     assert skill.options(obs(L0), ctx("speaker")) == []  # no private goal, nothing to say
@@ -457,7 +457,7 @@ def _deliver(intent: Intent, sender: str = "alice") -> tuple[InboxMessage, ...]:
 @pytest.mark.parametrize("key", range(4))
 def test_encode_decode_round_trip(reg: SkillRegistry, plain: int, key: int) -> None:
     encode, decode = reg.get("encode_message"), reg.get("decode_message")
-    sender = obs(memo={"private_symbol": str(plain), "key": str(key)})
+    sender = obs(facts={"private_symbol": str(plain), "key": str(key)})
     [option] = encode.options(sender, ctx("sender"))
     assert option.model_dump() == {"symbol": plain}
     sent = encode.execute(option, sender, ctx("sender"))
@@ -467,7 +467,7 @@ def test_encode_decode_round_trip(reg: SkillRegistry, plain: int, key: int) -> N
             to="*", kind="ciphertext", body={"skill": "encode_message", "ciphertext": plain ^ key}
         ),
     )
-    receiver = obs(messages=_deliver(sent), memo={"key": str(key)})
+    receiver = obs(messages=_deliver(sent), facts={"key": str(key)})
     [decoded] = decode.options(receiver, ctx("receiver"))
     assert decoded.model_dump() == {"symbol": plain}
     recorded = decode.execute(decoded, receiver, ctx("receiver"))
@@ -483,8 +483,8 @@ def test_encode_needs_both_private_symbol_and_key(reg: SkillRegistry) -> None:
         {"private_symbol": "1", "key": "x"},
         {},
     ):
-        assert skill.options(obs(memo=memo), ctx("sender")) == []
-    assert run(skill, obs(memo={"private_symbol": "1"}), ctx("sender"), symbol=1) == HOLD
+        assert skill.options(obs(facts=memo), ctx("sender")) == []
+    assert run(skill, obs(facts={"private_symbol": "1"}), ctx("sender"), symbol=1) == HOLD
 
 
 def test_decode_needs_a_key_and_a_well_formed_ciphertext(reg: SkillRegistry) -> None:
@@ -492,7 +492,7 @@ def test_decode_needs_a_key_and_a_well_formed_ciphertext(reg: SkillRegistry) -> 
     good = msg("ciphertext", {"ciphertext": 2})
     assert skill.options(obs(messages=(good,)), ctx("receiver")) == []
     bad = tuple(msg("ciphertext", {"ciphertext": c}) for c in (7, -1, True, "2", 1.5))
-    assert skill.options(obs(messages=bad, memo={"key": "1"}), ctx("receiver")) == []
+    assert skill.options(obs(messages=bad, facts={"key": "1"}), ctx("receiver")) == []
 
 
 def test_guess_message_offers_every_symbol_after_an_interception(reg: SkillRegistry) -> None:
@@ -517,7 +517,7 @@ def test_symbols_outside_0_to_3_are_refused(reg: SkillRegistry, name: str, bad: 
 
 def test_take_formation_slot_offers_only_the_owned_slot(reg: SkillRegistry) -> None:
     skill = reg.get("take_formation_slot")
-    assert invocations(skill, obs(SLOT0, SLOT1, memo={"slot": "S1"}), ctx("member")) == [
+    assert invocations(skill, obs(SLOT0, SLOT1, facts={"slot": "S1"}), ctx("member")) == [
         "take_formation_slot(target_id=S1)"
     ]
     assert invocations(skill, obs(SLOT0, SLOT1), ctx("member")) == [
@@ -571,7 +571,7 @@ def test_collector_collects_only_when_empty_and_delivers_only_its_colour(
         "cargo": "",
     }
 
-    loaded = obs(T_RED, T_BLUE, DEP_RED, DEP_BLUE, memo={"cargo": "blue"})
+    loaded = obs(T_RED, T_BLUE, DEP_RED, DEP_BLUE, facts={"cargo": "blue"})
     assert collect.options(loaded, ctx("collector")) == []
     assert run(collect, loaded, ctx("collector"), target_id="T0") == HOLD
     assert invocations(deliver, loaded, ctx("collector")) == ["deliver_treasure(target_id=db)"]
@@ -599,7 +599,7 @@ def test_meet_collector_follows_announced_cargo(reg: SkillRegistry) -> None:
 
 
 def test_collector_intent_feeds_meet_collector(reg: SkillRegistry) -> None:
-    loaded = obs(DEP_RED, memo={"cargo": "red"})
+    loaded = obs(DEP_RED, facts={"cargo": "red"})
     sent = run(reg.get("deliver_treasure"), loaded, ctx("collector"), target_id="dr")
     deposit_view = obs(uav("u1", "collector", -30.0, -30.0), messages=_deliver(sent, sender="u1"))
     assert invocations(reg.get("meet_collector"), deposit_view, ctx("deposit_red")) == [
@@ -612,7 +612,7 @@ def test_collector_intent_feeds_meet_collector(reg: SkillRegistry) -> None:
 
 def test_informed_agent_goal_and_decoys(reg: SkillRegistry) -> None:
     goal, decoy = reg.get("approach_goal"), reg.get("approach_decoy")
-    o = obs(L0, L1, L2, memo={"goal_landmark": "L1"})
+    o = obs(L0, L1, L2, facts={"goal_landmark": "L1"})
     assert invocations(goal, o, ctx("informed")) == ["approach_goal(target_id=L1)"]
     assert invocations(decoy, o, ctx("informed")) == [
         "approach_decoy(target_id=L0)",
@@ -761,7 +761,7 @@ def everything() -> Observation:
     memo = {"goal_landmark": "L1", "private_symbol": "1", "key": "2", "cargo": "red"}
     entities = (L0, L1, EVADER, FORAGER, PURSUER, LEADER, COLLECTOR, DEP_RED, T_RED, FOOD)
     return obs(
-        *entities, FOREST, SLOT0, memo=memo, messages=(TARGET_MSG, GOAL_MSG, CIPHER_MSG, CARGO_MSG)
+        *entities, FOREST, SLOT0, facts=memo, messages=(TARGET_MSG, GOAL_MSG, CIPHER_MSG, CARGO_MSG)
     )
 
 
@@ -809,7 +809,7 @@ _messages = st.builds(
     round_=st.integers(0, 5),
     seq=st.integers(1, 9),
 )
-_memo = st.dictionaries(
+_facts = st.dictionaries(
     st.sampled_from(["goal_landmark", "private_symbol", "key", "slot", "cargo"]),
     st.one_of(_ids, st.sampled_from(["0", "1", "2", "3", "red", "blue"])),
 )
@@ -819,13 +819,13 @@ _memo = st.dictionaries(
 @given(
     entities=st.lists(_entities, max_size=6),
     messages=st.lists(_messages, max_size=5),
-    memo=_memo,
+    facts=_facts,
     in_air=st.booleans(),
 )
 def test_no_observation_makes_a_skill_raise(
-    entities: list[Entity], messages: list[InboxMessage], memo: dict[str, str], in_air: bool
+    entities: list[Entity], messages: list[InboxMessage], facts: dict[str, str], in_air: bool
 ) -> None:
-    o = obs(*entities, messages=tuple(messages), memo=memo, in_air=in_air)
+    o = obs(*entities, messages=tuple(messages), facts=facts, in_air=in_air)
     for role in ROLES:
         c = ctx(role)
         for skill in (_REG.get(n) for n in NEW_SKILLS):

@@ -58,7 +58,16 @@ def add(
     """Append a one-record trajectory (episode = round unless given) whose return is
     exactly ``ret``, its only reward."""
     episode = rnd if episode is None else episode
-    m.append(task, role, uav, episode, rnd, state, skill, f"{skill}()")
+    m.append(
+        task=task,
+        role=role,
+        uav=uav,
+        episode=episode,
+        round=rnd,
+        state_text=state,
+        skill=skill,
+        invocation=f"{skill}()",
+    )
     if ret is not None:
         m.add_reward(uav, episode, rnd, ret, "test")
 
@@ -124,7 +133,16 @@ def test_tokeniser_words_numbers_and_context() -> None:
 
 def test_returns_with_gamma_exact(mem: ExperienceMemory) -> None:
     for t in range(4):
-        mem.append(T, R, "u1", 1, t, f"state {t}", "hold_position", "hold_position()")
+        mem.append(
+            task=T,
+            role=R,
+            uav="u1",
+            episode=1,
+            round=t,
+            state_text=f"state {t}",
+            skill="hold_position",
+            invocation="hold_position()",
+        )
     mem.add_reward("u1", 1, 0, 1.0, "sim")
     mem.add_reward("u1", 1, 1, 2.0, "sim")
     mem.add_reward("u1", 1, 2, 4.0, "sim")
@@ -143,7 +161,16 @@ def test_returns_paper_gamma_and_delivery_order(tmp_path: Path) -> None:
         m.add_reward("u1", 7, 3, rewards[3], "sim")
         m.add_reward("u1", 7, 1, rewards[1], "sim")
         for t in range(4):
-            m.append(T, R, "u1", 7, t, "s", "hold_position", "hold_position()")
+            m.append(
+                task=T,
+                role=R,
+                uav="u1",
+                episode=7,
+                round=t,
+                state_text="s",
+                skill="hold_position",
+                invocation="hold_position()",
+            )
         m.add_reward("u1", 7, 2, rewards[2], "sim")
         m.add_reward("u1", 7, 0, rewards[0], "sim")
         for t in range(4):
@@ -155,9 +182,15 @@ def test_returns_paper_gamma_and_delivery_order(tmp_path: Path) -> None:
 
 
 def test_other_trajectories_untouched(mem: ExperienceMemory) -> None:
-    mem.append(T, R, "u1", 1, 0, "s", "a", "a()")
-    mem.append(T, R, "u2", 1, 0, "s", "a", "a()")
-    mem.append(T, R, "u1", 2, 0, "s", "a", "a()")
+    mem.append(
+        task=T, role=R, uav="u1", episode=1, round=0, state_text="s", skill="a", invocation="a()"
+    )
+    mem.append(
+        task=T, role=R, uav="u2", episode=1, round=0, state_text="s", skill="a", invocation="a()"
+    )
+    mem.append(
+        task=T, role=R, uav="u1", episode=2, round=0, state_text="s", skill="a", invocation="a()"
+    )
     mem.add_reward("u1", 1, 0, 5.0, "sim")
     assert [one(mem, *k).ret for k in (("u1", 1, 0), ("u2", 1, 0), ("u1", 2, 0))] == [
         5.0,
@@ -167,8 +200,12 @@ def test_other_trajectories_untouched(mem: ExperienceMemory) -> None:
 
 
 def test_reward_idempotent_and_replaced(mem: ExperienceMemory) -> None:
-    mem.append(T, R, "u1", 1, 0, "s", "a", "a()")
-    mem.append(T, R, "u1", 1, 1, "s", "a", "a()")
+    mem.append(
+        task=T, role=R, uav="u1", episode=1, round=0, state_text="s", skill="a", invocation="a()"
+    )
+    mem.append(
+        task=T, role=R, uav="u1", episode=1, round=1, state_text="s", skill="a", invocation="a()"
+    )
     assert mem.add_reward("u1", 1, 1, 2.0, "sim") is True
     assert mem.add_reward("u1", 1, 1, 2.0, "sim") is False  # duplicate delivery
     assert one(mem, "u1", 1, 0).ret == 1.0
@@ -181,17 +218,52 @@ def test_reward_idempotent_and_replaced(mem: ExperienceMemory) -> None:
 
 
 def test_append_deduplicates(mem: ExperienceMemory) -> None:
-    assert mem.append(T, R, "u1", 1, 0, "s", "a", "a()") is True
-    assert mem.append(T, R, "u1", 1, 0, "other", "b", "b()") is False
+    assert (
+        mem.append(
+            task=T,
+            role=R,
+            uav="u1",
+            episode=1,
+            round=0,
+            state_text="s",
+            skill="a",
+            invocation="a()",
+        )
+        is True
+    )
+    assert (
+        mem.append(
+            task=T,
+            role=R,
+            uav="u1",
+            episode=1,
+            round=0,
+            state_text="other",
+            skill="b",
+            invocation="b()",
+        )
+        is False
+    )
     assert len(mem) == 1
     assert one(mem, "u1", 1, 0).skill == "a"
 
 
 def test_finalise_and_export(mem: ExperienceMemory) -> None:
     for t in range(3):
-        mem.append(T, R, "u1", 1, t, "s", "cover_landmark", f"cover_landmark(target=L{t})")
+        mem.append(
+            task=T,
+            role=R,
+            uav="u1",
+            episode=1,
+            round=t,
+            state_text="s",
+            skill="cover_landmark",
+            invocation=f"cover_landmark(target=L{t})",
+        )
         mem.add_reward("u1", 1, t, 1.0, "sim")
-    mem.append(T, R, "u1", 2, 0, "s", "a", "a()")
+    mem.append(
+        task=T, role=R, uav="u1", episode=2, round=0, state_text="s", skill="a", invocation="a()"
+    )
     assert mem.export_final("u1", 1) == []
     assert mem.finalise("u1", 1) == 3
     assert mem.finalise("u1", 1) == 0
@@ -272,9 +344,36 @@ def test_unseen_skill_and_empty_memory_give_zero(mem: ExperienceMemory) -> None:
 
 def test_parameterisations_share_skill_advantage(mem: ExperienceMemory) -> None:
     s = "landmark l1 landmark l2"
-    mem.append(T, R, "u1", 1, 0, s, "cover_landmark", "cover_landmark(target=L1)")
-    mem.append(T, R, "u1", 1, 1, s, "cover_landmark", "cover_landmark(target=L2)")
-    mem.append(T, R, "u1", 1, 2, s, "hold_position", "hold_position()")
+    mem.append(
+        task=T,
+        role=R,
+        uav="u1",
+        episode=1,
+        round=0,
+        state_text=s,
+        skill="cover_landmark",
+        invocation="cover_landmark(target=L1)",
+    )
+    mem.append(
+        task=T,
+        role=R,
+        uav="u1",
+        episode=1,
+        round=1,
+        state_text=s,
+        skill="cover_landmark",
+        invocation="cover_landmark(target=L2)",
+    )
+    mem.append(
+        task=T,
+        role=R,
+        uav="u1",
+        episode=1,
+        round=2,
+        state_text=s,
+        skill="hold_position",
+        invocation="hold_position()",
+    )
     mem.add_reward("u1", 1, 2, 0.0, "sim")  # G2 = 0
     mem.add_reward("u1", 1, 1, 2.0, "sim")  # G1 = 2
     mem.add_reward("u1", 1, 0, 1.0, "sim")  # G0 = 1 + 0.5*2 = 2
@@ -354,7 +453,16 @@ def test_ingest_refuses_malformed(mem: ExperienceMemory, bad: dict[str, object])
 def test_ingest_round_trip_between_daemons(tmp_path: Path) -> None:
     with ExperienceMemory(tmp_path / "a.sqlite") as a, ExperienceMemory(tmp_path / "b.sqlite") as b:
         for t in range(3):
-            a.append(T, R, "u1", 1, t, f"landmark l{t}", "cover_landmark", "cover_landmark()")
+            a.append(
+                task=T,
+                role=R,
+                uav="u1",
+                episode=1,
+                round=t,
+                state_text=f"landmark l{t}",
+                skill="cover_landmark",
+                invocation="cover_landmark()",
+            )
             a.add_reward("u1", 1, t, float(t), "sim")
         a.finalise("u1", 1)
         for i, rec in enumerate(a.export_final("u1", 1)):
@@ -372,14 +480,14 @@ def fill_small(m: ExperienceMemory) -> None:
         for t in range(6):
             skill = ("cover", "hold", "explore")[(ep + t) % 3]
             m.append(
-                T,
-                R,
-                "u1",
-                ep,
-                t,
-                f"landmark l{t % 3} dist {5 * t} peer uav{ep}",
-                skill,
-                f"{skill}(target=L{t})",
+                task=T,
+                role=R,
+                uav="u1",
+                episode=ep,
+                round=t,
+                state_text=f"landmark l{t % 3} dist {5 * t} peer uav{ep}",
+                skill=skill,
+                invocation=f"{skill}(target=L{t})",
             )
             m.add_reward("u1", ep, t, float((ep * 7 + t * 3) % 5) - 2.0, "sim")
         m.finalise("u1", ep)
@@ -417,7 +525,16 @@ def test_index_built_before_writes_matches_rebuilt_index(db: Path) -> None:
 def test_gamma_change_recomputes_own_returns(db: Path) -> None:
     with ExperienceMemory(db, gamma=0.5) as m:
         for t in range(2):
-            m.append(T, R, "u1", 1, t, "s", "a", "a()")
+            m.append(
+                task=T,
+                role=R,
+                uav="u1",
+                episode=1,
+                round=t,
+                state_text="s",
+                skill="a",
+                invocation="a()",
+            )
             m.add_reward("u1", 1, t, 2.0, "sim")
     with ExperienceMemory(db, gamma=1.0) as m:
         assert [r.ret for r in m.records(T, R)] == [4.0, 2.0]
@@ -480,7 +597,16 @@ def test_disk_full_is_dropped_not_raised(mem: ExperienceMemory) -> None:
     mem._db.execute(f"PRAGMA max_page_count = {pages}")  # the next new page is "disk full"
     big = "landmark l1 " + "filler " * 2000
     for t in range(1, 20):
-        mem.append(T, R, "u1", 1, t, big + str(t), "b", "b()")
+        mem.append(
+            task=T,
+            role=R,
+            uav="u1",
+            episode=1,
+            round=t,
+            state_text=big + str(t),
+            skill="b",
+            invocation="b()",
+        )
     assert mem.write_errors > 0
     assert mem.advantages(T, R, "landmark l1", ["a"]) == {"a": 0.0}  # still answers
     assert all(n.key[2] == 0 or mem.get(*n.key) for n in mem.neighbourhood_of(T, R, "landmark"))
@@ -532,7 +658,16 @@ def test_advantages_match_bruteforce_oracle(
     with ExperienceMemory(None, neighbourhood=k, gamma=0.9) as m:
         m.advantages(T, R, query, [])  # index live while writing
         for i, (state, skill, reward) in enumerate(rows):
-            m.append(T, R, f"u{i % 3}", i // 3, i, state, skill, f"{skill}()")
+            m.append(
+                task=T,
+                role=R,
+                uav=f"u{i % 3}",
+                episode=i // 3,
+                round=i,
+                state_text=state,
+                skill=skill,
+                invocation=f"{skill}()",
+            )
             if reward is not None:
                 m.add_reward(f"u{i % 3}", i // 3, i, float(reward), "sim")
         want = oracle(m.records(T, R), query, k, ["a", "b", "c", "d"])
@@ -565,7 +700,16 @@ async def test_async_wrapper_does_not_block_the_loop(db: Path) -> None:
     tick_task = asyncio.create_task(ticker())
     try:
         for t in range(3):
-            assert await mem.append(T, R, "u1", 1, t, "landmark l1", "a", "a()")
+            assert await mem.append(
+                task=T,
+                role=R,
+                uav="u1",
+                episode=1,
+                round=t,
+                state_text="landmark l1",
+                skill="a",
+                invocation="a()",
+            )
             assert await mem.add_reward("u1", 1, t, 1.0, "sim")
         assert await mem.finalise("u1", 1) == 3
         await asyncio.sleep(0.02)
@@ -595,7 +739,16 @@ async def test_async_wrapper_does_not_block_the_loop(db: Path) -> None:
 async def test_async_from_config_in_memory() -> None:
     mem = await AsyncExperienceMemory.from_config(AgentConfig())
     try:
-        assert await mem.append(T, R, "u1", 1, 0, "s", "a", "a()")
+        assert await mem.append(
+            task=T,
+            role=R,
+            uav="u1",
+            episode=1,
+            round=0,
+            state_text="s",
+            skill="a",
+            invocation="a()",
+        )
         assert await mem.count() == 1
         assert await mem.warm(T, R) == 1
     finally:

@@ -1,5 +1,6 @@
-"""The scripted scorer: a normalised distribution over exactly the candidate labels, and a
-preference for the nearest landmark no other UAV is better placed to take."""
+"""The scripted scorer on coverage: a normalised distribution over exactly the candidate
+labels, and (coverage's reference policy) a preference for the nearest landmark no other UAV
+is better placed to take."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 
 from aeroweaver_edge.agent.candidates import build_candidates
 from aeroweaver_edge.agent.scoring import LabelScores, choose
-from aeroweaver_edge.agent.scripted import NearestUncoveredScorer
+from aeroweaver_edge.agent.scripted import ReferenceScorer
 from aeroweaver_edge.observation import Observation, VehicleState
 from aeroweaver_edge.ports import DecisionRequest
 from aeroweaver_edge.skill_api import SkillContext
@@ -63,11 +64,12 @@ def request(
         skill_docs=(),
         observation_text="",
         candidates=cs.candidates,
+        task="coverage",
     )
 
 
-async def pick(req: DecisionRequest, scorer: NearestUncoveredScorer | None = None) -> str:
-    scores = await (scorer or NearestUncoveredScorer()).score(req)
+async def pick(req: DecisionRequest, scorer: ReferenceScorer | None = None) -> str:
+    scores = await (scorer or ReferenceScorer()).score(req)
     choice = choose(scores, [c.label for c in req.candidates], {}, beta=0.0)
     assert choice.label is not None
     return next(c.text for c in req.candidates if c.label == choice.label)
@@ -88,13 +90,13 @@ async def test_scores_are_a_normalised_distribution_over_the_labels(reg: SkillRe
         request(reg, pos=(68.0, 0.0, -5.0)),
         request(reg, L_NEAR, Entity(id="uav1", kind="uav", pos=(9.0, 0.0, -5.0))),
     ):
-        assert_distribution(await NearestUncoveredScorer().score(req), req)
+        assert_distribution(await ReferenceScorer().score(req), req)
 
 
 async def test_no_candidates_gives_no_labels(reg: SkillRegistry) -> None:
     req = request(reg)
     empty = dataclasses.replace(req, candidates=())
-    scores = await NearestUncoveredScorer().score(empty)
+    scores = await ReferenceScorer().score(empty)
     assert scores.logprobs == {}
     assert choose(scores, [], {}, 0.0).label is None
 
@@ -149,10 +151,10 @@ async def test_returns_in_bounds_near_the_edge(reg: SkillRegistry) -> None:
 
 async def test_is_deterministic_and_temperature_keeps_the_order(reg: SkillRegistry) -> None:
     req = request(reg, L_NEAR, L_FAR, Entity(id="uav1", kind="uav", pos=(0.0, 25.0, -5.0)))
-    a = await NearestUncoveredScorer().score(req)
-    b = await NearestUncoveredScorer().score(req)
+    a = await ReferenceScorer().score(req)
+    b = await ReferenceScorer().score(req)
     assert a == b
-    hot = await NearestUncoveredScorer(temperature=10.0).score(req)
+    hot = await ReferenceScorer(temperature=10.0).score(req)
     assert_distribution(hot, req)
     assert sorted(a.logprobs, key=a.logprobs.__getitem__) == sorted(
         hot.logprobs, key=hot.logprobs.__getitem__

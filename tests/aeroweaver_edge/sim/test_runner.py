@@ -16,7 +16,8 @@ from aeroweaver_edge.config import SimConfig
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
-from aeroweaver_edge.sim.tasks import make_task
+from aeroweaver_edge.tasks import create
+from aeroweaver_edge.tasks.base import TaskDefinition
 from aeroweaver_edge.wire import HeaderFactory, Keys, SimCommand, SimPerception, Vec3
 from tests.helpers.zenoh_net import ZenohNet
 
@@ -48,9 +49,16 @@ def command(
     uav: str | None = None,
     vel: Vec3 = (0.0, 0.0, 0.0),
     held: bool = False,
+    guess: str | None = None,
 ) -> SimCommand:
     return SimCommand(
-        h=hf.next(), uav=uav or p.uav, episode=p.episode, round=p.round, vel=vel, held=held
+        h=hf.next(),
+        uav=uav or p.uav,
+        episode=p.episode,
+        round=p.round,
+        vel=vel,
+        held=held,
+        guess=guess,
     )
 
 
@@ -79,7 +87,10 @@ async def stand_in(net: ZenohNet, uav: str, policy: Policy) -> StandIn:
 
 
 async def play(
-    net: ZenohNet, policies: dict[str, Policy], rounds: int
+    net: ZenohNet,
+    policies: dict[str, Policy],
+    rounds: int,
+    task: TaskDefinition | None = None,
 ) -> tuple[WorldRunner, EpisodeResult, list[RoundLog], dict[str, StandIn]]:
     world_mesh = await net.open("world")
     cfg = SimConfig(uavs=len(policies), max_rounds=rounds, deadline_s=DEADLINE_S)
@@ -91,7 +102,7 @@ async def play(
     runner = WorldRunner(
         world_mesh,
         SWARM,
-        make_task("coverage", len(policies), max_rounds=rounds),
+        task or create("coverage", len(policies), max_rounds=rounds),
         cfg,
         on_round=on_round,
     )
@@ -171,3 +182,34 @@ async def test_commands_for_another_round_do_not_count(zenoh_net: ZenohNet) -> N
     assert [log.missed for log in logs] == [("uav0",), ("uav0",)]
     assert runner.stats.deadline_misses == 2
     assert ins["uav0"].pos(1) == ins["uav0"].pos(0)
+
+
+async def test_private_facts_reach_only_their_role_and_guesses_are_scored(
+    zenoh_net: ZenohNet,
+) -> None:
+    """Private communication over the real mesh: the sender's perception carries symbol and
+    key, the receiver's only the key; the receiver's guess travels in its command and the
+    world scores it (the scripted eavesdropper heard nothing: no ciphertext was sent)."""
+    task = create("private_communication", 2, max_rounds=5)
+
+    def receiver(p: SimPerception, hf: HeaderFactory) -> list[tuple[str, SimCommand]]:
+        key = int(p.facts["key"])
+        return [(KEYS.sim_command(p.uav), command(hf, p, held=True, guess=str(3 ^ key)))]
+
+    _runner, result, _logs, ins = await play(
+        zenoh_net, {"uav0": holding, "uav1": receiver}, 5, task=task
+    )
+    sender_facts = {tuple(sorted(p.facts)) for p in ins["uav0"].seen}
+    receiver_facts = {tuple(sorted(p.facts)) for p in ins["uav1"].seen}
+    assert sender_facts == {("key", "private_symbol")}
+    assert receiver_facts == {("key",)}
+    assert ins["uav0"].seen[0].facts["key"] == ins["uav1"].seen[0].facts["key"]
+    symbol = int(ins["uav0"].seen[0].facts["private_symbol"])
+    key = int(ins["uav1"].seen[0].facts["key"])
+    assert (result.rounds, result.reason) == (3, "complete")  # ends after round 3
+    right = 3 ^ key == symbol
+    assert result.metrics["receiver_correct"] == float(right)
+    assert result.metrics["eavesdropper_correct"] == 0.0
+    # Bob right: 0 per round; wrong: -2 per round (3 rounds); Eve never spoke.
+    assert result.returns["uav1"] == (0.0 if right else -6.0)
+    assert result.returns["eavesdropper0"] == 0.0

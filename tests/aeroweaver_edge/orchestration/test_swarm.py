@@ -12,8 +12,9 @@ from typing import Any
 
 import pytest
 
+from aeroweaver_edge.orchestration.daemons import DaemonSet
+from aeroweaver_edge.orchestration.swarm import RunSummary, SwarmOptions, run_swarm
 from aeroweaver_edge.sim.runner import RoundLog
-from aeroweaver_edge.sim.swarm import RunSummary, SwarmOptions, _Daemons, run_swarm
 from commander.progress import ProgressBoard
 
 SUMMARY_KEYS = {
@@ -65,7 +66,7 @@ async def test_in_process_coverage_episode_completes() -> None:
     data = summary.as_dict()
     check_summary(data)
     assert data["mode"] == "in-process"
-    assert data["selector"] == "scripted:nearest-uncovered"
+    assert data["selector"] == "scripted:reference"
     assert len(logs) == data["rounds"]
     # Every UAV answered every round in time: nobody was missing or absent.
     assert all(set(log.commands) == set(UAVS) and not log.missed and not log.absent for log in logs)
@@ -90,7 +91,7 @@ async def test_a_killed_daemon_is_marked_lost_and_the_rest_keep_deciding(process
     victim, kill_after = "uav2", 2
     logs: list[RoundLog] = []
 
-    async def fault(log: RoundLog, daemons: _Daemons) -> None:
+    async def fault(log: RoundLog, daemons: DaemonSet) -> None:
         logs.append(log)
         if log.round == kill_after:
             await daemons.kill(victim)

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from aeroweaver_edge.config import SimConfig
-from aeroweaver_edge.sim.world import KinematicWorld
+from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.wire import Entity
 
 # Defaults: 11 m/s cap, 30 m/s² (1.5 m/s per 0.05 s tick), 0.5 s rounds of 10 ticks.

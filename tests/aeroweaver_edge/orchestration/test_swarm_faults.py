@@ -11,10 +11,11 @@ import sys
 
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
+from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 from aeroweaver_edge.sim.runner import RoundLog
-from aeroweaver_edge.sim.swarm import SwarmOptions, run_swarm
 from commander.commander import Commander
-from commander.plan import MissionPlan, UavAssignment, template_plan
+from commander.harness import plan_for_task
+from commander.plan import MissionPlan, UavAssignment
 from commander.progress import ProgressBoard
 
 
@@ -44,7 +45,7 @@ async def test_a_reassignment_mid_mission_is_picked_up_by_the_running_daemons() 
         nonlocal switched
         if log.round == 2 and not switched:
             switched = True
-            base = template_plan("coverage", ["uav0", "uav1", "uav2"], "coverage-s4")
+            base = plan_for_task("coverage", ["uav0", "uav1", "uav2"], mission_id="coverage-s4")
             hold_only = UavAssignment("observer", "Hold.", ("hold_position",))
             plan = MissionPlan(
                 mission_id=base.mission_id,

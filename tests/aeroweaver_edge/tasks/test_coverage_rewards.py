@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from aeroweaver_edge.sim.rewards.mpe import SpreadRewards, UnitScale
-from aeroweaver_edge.sim.tasks.coverage import CoverageTask
-from aeroweaver_edge.sim.world import KinematicWorld
+from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.tasks.coverage import Coverage, SpreadRewards
+from aeroweaver_edge.tasks.mpe import UnitScale
 from aeroweaver_edge.wire import Entity
 
 NE = tuple[float, float]
@@ -154,7 +154,7 @@ def test_wrong_sizes_are_rejected(spread3: SpreadRewards) -> None:
 
 
 def test_coverage_task_rewards_use_world_state(native: Any) -> None:
-    task = CoverageTask(3)
+    task = Coverage(3)
     world = KinematicWorld()
     agents, landmarks = STATES[2][1], STATES[2][2]
     for i, pos in enumerate(agents):

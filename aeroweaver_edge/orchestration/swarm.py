@@ -1,9 +1,12 @@
 """A whole simulated swarm on one machine: world + N daemons + Commander over loopback Zenoh.
 
-Every daemon has its own Zenoh session, either as a task in this event loop or, with
-``processes=True``, as its own OS process started with ``aeroweaver daemon`` (spawned, so no
-Zenoh session is ever forked). Both modes run the same code and, for a deterministic
-selector, give the same returns for the same seed.
+The one place that wires the three together (``aeroweaver sim``; the benchmark builds on it):
+the plan is decided first (from the task name, or by parsing the mission text once), the
+world flies that plan's task with that plan's roles, the Commander publishes the plan, and
+one daemon per participant decides. Every daemon has its own Zenoh session, either as a task
+in this event loop or, with ``processes=True``, as its own OS process started with
+``aeroweaver daemon`` (spawned, so no Zenoh session is ever forked). Both modes run the same
+code and, for a deterministic selector, give the same returns for the same seed.
 """
 
 from __future__ import annotations
@@ -13,54 +16,48 @@ import contextlib
 import json
 import math
 import socket
-import sys
 import tempfile
 import time
 import uuid
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from aeroweaver_edge.app import run_daemon
+from aeroweaver_edge import defaults as d
 from aeroweaver_edge.config import AgentConfig, LLMConfig, MeshConfig, SimConfig, UavConfig
 from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.orchestration.daemons import DaemonSet
+from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
+from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
-from aeroweaver_edge.sim.tasks import make_task
-from aeroweaver_edge.skills import load_skills
+from aeroweaver_edge.tasks import create
+from aeroweaver_edge.tasks.base import TaskDefinition
 from commander.commander import Commander
-from commander.harness import plan_from_text
-from commander.plan import MissionPlan, template_plan
+from commander.plan import MissionPlan
 from commander.progress import ProgressBoard
-
-HONESTY_NOTE = {
-    "scripted": "Decisions come from a scripted heuristic scorer, not an LLM: these returns say "
-    "nothing about LLM quality.",
-    "embedded": "Decisions come from SmolLM2-135M (embedded plumbing demo; strong position bias, "
-    "no useful judgement): these returns are not evidence about LLM-driven swarm performance.",
-    "endpoint": "Decisions come from the configured LLM endpoint.",
-}
 
 
 @dataclass(frozen=True)
 class SwarmOptions:
-    task: str = "coverage"
-    uavs: int = 3
+    task: str | None = None  # None: from the mission text, else coverage
+    uavs: int | None = None  # None: the mission's count, else the task's default team
     seed: int = 1
     episodes: int = 1
-    max_rounds: int = 24
+    max_rounds: int = d.MAX_ROUNDS
     processes: bool = False
     selector: Literal["llm", "scripted"] = "llm"
     llm: LLMConfig = field(default_factory=LLMConfig)
-    beta: float = 0.8
-    gamma: float = 0.95
+    beta: float = d.BETA
+    gamma: float = d.GAMMA
     memory_dir: Path | None = None  # None: a fresh temporary directory per run
     share_experience: bool = True
-    deadline_s: float = 30.0
+    deadline_s: float = d.DEADLINE_S
     mission_text: str | None = None
-    top_k: int = 8  # task skills activated per UAV by the Commander (plus hold_position)
+    top_k: int = d.TOP_K  # task skills activated per UAV by the Commander (plus hold_position)
     swarm: str = "sim"
+    measure_rss: bool = False  # read every daemon process's peak RSS before it exits
 
 
 @dataclass
@@ -73,6 +70,7 @@ class RunSummary:
     episodes: list[dict[str, Any]] = field(default_factory=list)
     messages_sent: int = 0
     messages_dropped: int = 0
+    deliveries: int = 0
     decode_errors: int = 0
     holds: int = 0
     deadline_misses: int = 0
@@ -85,13 +83,17 @@ class RunSummary:
     llm_calls: int = 0
     note: str = ""
     mission: dict[str, Any] | None = None
+    roles: dict[str, str] = field(default_factory=dict)
     tokens_by_agent: dict[str, int] = field(default_factory=dict)
     tokens_by_role: dict[str, int] = field(default_factory=dict)
     decision_latency_s: dict[str, float] = field(default_factory=dict)
+    round_wall_s: list[float] = field(default_factory=list)
+    peak_rss_kb: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
-        agents = sorted({a for e in eps for a in e["agent_returns"]})
+        agents = sorted({a for e in eps for a in e["agent_returns"]}, key=natural)
+        scripted = sorted({a for e in eps for a in e.get("scripted_returns", {})})
         return {
             "task": self.task,
             "seed": self.seed,
@@ -104,9 +106,14 @@ class RunSummary:
             # With several episodes the top-level returns are means over episodes.
             "team_return": _mean([e["team_return"] for e in eps]),
             "agent_returns": {a: _mean([e["agent_returns"][a] for e in eps]) for a in agents},
+            "scripted_returns": {
+                a: _mean([e["scripted_returns"][a] for e in eps]) for a in scripted
+            },
+            "roles": self.roles,
             "episodes": eps,
             "messages_sent": self.messages_sent,
             "messages_dropped": self.messages_dropped,
+            "deliveries": self.deliveries,
             "decode_errors": self.decode_errors,
             "holds": self.holds,
             "deadline_misses": self.deadline_misses,
@@ -115,6 +122,8 @@ class RunSummary:
             "tokens_by_agent": self.tokens_by_agent,
             "tokens_by_role": self.tokens_by_role,
             "decision_latency_s": self.decision_latency_s,
+            "round_wall_s": percentiles(self.round_wall_s),
+            "peak_rss_kb": self.peak_rss_kb,
             "setup_tokens": self.setup_tokens,
             "mission": self.mission,
             "llm_calls": self.llm_calls,
@@ -127,11 +136,11 @@ def _mean(xs: list[float]) -> float:
     return math.fsum(xs) / len(xs) if xs else math.nan
 
 
-def _percentiles(xs: list[float]) -> dict[str, float]:
-    """Round latency (observe to act, inside the daemon) over every decision of the run."""
-    if not xs:
+def percentiles(xs: Iterable[float]) -> dict[str, float]:
+    """p50, p95 and max (nearest rank), rounded to 0.1 ms."""
+    ys: list[float] = sorted(xs)
+    if not ys:
         return {}
-    ys = sorted(xs)
 
     def at(q: float) -> float:
         return round(ys[min(len(ys) - 1, round(q * (len(ys) - 1)))], 4)
@@ -145,7 +154,7 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _mesh_configs(namespace: str) -> tuple[MeshConfig, MeshConfig]:
+def mesh_configs(namespace: str) -> tuple[MeshConfig, MeshConfig]:
     port = free_port()
     seed = MeshConfig(listen=[f"tcp/127.0.0.1:{port}"], namespace=namespace)
     peer = MeshConfig(
@@ -154,113 +163,24 @@ def _mesh_configs(namespace: str) -> tuple[MeshConfig, MeshConfig]:
     return seed, peer
 
 
-def _episode_dict(ep: int, res: EpisodeResult, board: ProgressBoard) -> dict[str, Any]:
+def _episode_dict(ep: int, res: EpisodeResult, task: TaskDefinition) -> dict[str, Any]:
+    ours = {u: res.returns[u] for u in sorted(task.uav_ids, key=natural)}
+    theirs = {b: res.returns[b] for b in task.scripted_ids}
     return {
         "episode": ep,
         "rounds": res.rounds,
         "reason": res.reason,
         "team_return": res.team_mean_return,
-        "agent_returns": dict(sorted(res.returns.items())),
+        "agent_returns": ours,
+        "scripted_returns": theirs,
         "metrics": res.metrics,
     }
 
 
-class _Daemons:
-    """Starts and stops the swarm's daemons, in this loop or as OS processes."""
-
-    def __init__(self, configs: list[UavConfig], processes: bool, workdir: Path) -> None:
-        self.configs = configs
-        self.processes = processes
-        self.workdir = workdir
-        self.tasks: dict[str, asyncio.Task[Any]] = {}
-        self.procs: dict[str, asyncio.subprocess.Process] = {}
-
-    async def start(self) -> None:
-        registry = load_skills()
-        for cfg in self.configs:
-            if self.processes:
-                path = self.workdir / f"{cfg.uav}.json"
-                path.write_text(cfg.model_dump_json(indent=2), encoding="utf-8")
-                log = (self.workdir / f"{cfg.uav}.log").open("wb")  # the child inherits it
-                self.procs[cfg.uav] = await asyncio.create_subprocess_exec(
-                    sys.executable,
-                    "-m",
-                    "aeroweaver_edge.cli",
-                    "daemon",
-                    "--config",
-                    str(path),
-                    stdin=asyncio.subprocess.DEVNULL,
-                    stdout=log,
-                    stderr=log,
-                )
-                log.close()
-            else:
-                self.tasks[cfg.uav] = asyncio.create_task(
-                    run_daemon(cfg, registry=registry), name=cfg.uav
-                )
-
-    async def kill(self, uav: str) -> None:
-        """Fault injection: the daemon dies abruptly (process SIGKILL, or task cancelled)."""
-        if uav in self.procs:
-            self.procs[uav].kill()
-            await self.procs[uav].wait()
-        elif uav in self.tasks:
-            self.tasks[uav].cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await self.tasks[uav]
-
-    def failed(self) -> dict[str, str]:
-        """Daemons that ended before the run did, with the reason."""
-        out: dict[str, str] = {}
-        for uav, t in self.tasks.items():
-            if t.done() and not t.cancelled() and t.exception() is not None:
-                out[uav] = repr(t.exception())
-        for uav, p in self.procs.items():
-            if p.returncode not in (None, 0):
-                tail = (self.workdir / f"{uav}.log").read_text(errors="replace")[-2000:]
-                out[uav] = f"exit {p.returncode}: {tail}"
-        return out
-
-    async def stop(self, timeout_s: float = 15.0) -> None:
-        waits = [*self.tasks.values()]
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(timeout_s):
-                await asyncio.gather(
-                    *waits, *(p.wait() for p in self.procs.values()), return_exceptions=True
-                )
-        for t in self.tasks.values():
-            t.cancel()
-        await asyncio.gather(*self.tasks.values(), return_exceptions=True)
-        for p in self.procs.values():
-            if p.returncode is None:
-                p.kill()
-                await p.wait()
-
-
-@contextlib.asynccontextmanager
-async def _shared_llm(opts: SwarmOptions) -> AsyncIterator[tuple[LLMConfig, str]]:
-    """One LLM endpoint for the whole swarm: the configured one, or the embedded server."""
-    if opts.selector != "llm":
-        yield opts.llm, "scripted"
-        return
-    if opts.llm.base_url is not None:
-        yield opts.llm, "endpoint"
-        return
-    from aeroweaver_edge.llm.embedded import EmbeddedServer
-
-    async with EmbeddedServer() as server:
-        yield (
-            opts.llm.model_copy(update={"base_url": server.base_url, "model": server.model}),
-            "embedded",
-        )
-
-
-async def _probe(llm: LLMConfig) -> str:
-    from aeroweaver_edge.llm.client import ChatClient
-    from aeroweaver_edge.llm.probe import probe_endpoint
-
-    async with ChatClient.from_config(llm) as client:
-        return (await probe_endpoint(client)).summary()
+def world_task(plan: MissionPlan, max_rounds: int) -> TaskDefinition:
+    """The task definition the world flies for ``plan``: its task, its UAVs and roles."""
+    roles = {u: plan.assignments[u].role for u in sorted(plan.assignments, key=natural)}
+    return create(plan.task, roles, max_rounds=max_rounds)
 
 
 async def run_swarm(
@@ -268,41 +188,56 @@ async def run_swarm(
     *,
     on_round: Callable[[RoundLog, ProgressBoard], Awaitable[None]] | None = None,
     plan_factory: Callable[[list[str]], Awaitable[MissionPlan]] | None = None,
-    fault: Callable[[RoundLog, _Daemons], Awaitable[None]] | None = None,
+    fault: Callable[[RoundLog, DaemonSet], Awaitable[None]] | None = None,
     on_commander: Callable[[Commander], None] | None = None,
 ) -> RunSummary:
     started = time.monotonic()
-    task = make_task(opts.task, opts.uavs, max_rounds=opts.max_rounds)
-    sim_cfg = SimConfig(
-        task=opts.task,
-        uavs=opts.uavs,
-        seed=opts.seed,
-        max_rounds=opts.max_rounds,
-        deadline_s=opts.deadline_s,
-    )
-    namespace = f"aw-{uuid.uuid4().hex[:10]}"
-    seed_mesh_cfg, peer_mesh_cfg = _mesh_configs(namespace)
-    uavs = task.uav_ids
-    summary = RunSummary(
-        opts.task,
-        opts.seed,
-        opts.uavs,
-        "processes" if opts.processes else "in-process",
-        opts.selector,
-    )
-
     async with contextlib.AsyncExitStack() as stack:
+        llm, source = await stack.enter_async_context(
+            shared_llm(opts.llm, needed=opts.selector == "llm")
+        )
+        if plan_factory is not None:
+            plan = await plan_factory(uav_ids(opts.uavs or 3))
+        else:
+            plan = await plan_run(
+                task=opts.task,
+                uavs=opts.uavs,
+                mission_text=opts.mission_text,
+                llm=llm if opts.selector == "llm" else None,
+                top_k=opts.top_k,
+                mission_id=None if opts.mission_text else f"{opts.task or 'coverage'}-s{opts.seed}",
+            )
+        task = world_task(plan, opts.max_rounds)
+        uavs = task.uav_ids
+        summary = RunSummary(
+            plan.task,
+            opts.seed,
+            len(uavs),
+            "processes" if opts.processes else "in-process",
+            opts.selector,
+            roles=task.roles(),
+            setup_tokens=plan.setup_tokens,
+            mission=plan.as_dict(),
+            note=HONESTY_NOTE[source],
+        )
+        if opts.selector == "llm":
+            summary.model = llm.model
+            summary.probe = await probe(llm)
+            summary.selector = f"llm:{llm.model}"
+        else:
+            summary.selector = "scripted:reference"
+        sim_cfg = SimConfig(
+            task=plan.task,
+            uavs=len(uavs),
+            seed=opts.seed,
+            max_rounds=opts.max_rounds,
+            deadline_s=opts.deadline_s,
+        )
+        namespace = f"aw-{uuid.uuid4().hex[:10]}"
+        seed_mesh_cfg, peer_mesh_cfg = mesh_configs(namespace)
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="aeroweaver-")))
         memory_dir = opts.memory_dir or tmp
         memory_dir.mkdir(parents=True, exist_ok=True)
-        llm, source = await stack.enter_async_context(_shared_llm(opts))
-        summary.note = HONESTY_NOTE[source]
-        if opts.selector == "llm":
-            summary.model = llm.model
-            summary.probe = await _probe(llm)
-            summary.selector = f"llm:{llm.model}"
-        else:
-            summary.selector = "scripted:nearest-uncovered"
 
         world_mesh = await Mesh.open(seed_mesh_cfg, node_id="world")
         stack.push_async_callback(world_mesh.aclose)
@@ -312,6 +247,8 @@ async def run_swarm(
         board_ref: dict[str, ProgressBoard] = {}
 
         async def round_hook(log: RoundLog) -> None:
+            summary.round_wall_s.append(log.wall_s)
+            summary.deliveries += log.deliveries
             if fault is not None:
                 await fault(log, daemons)
             if on_round is not None:
@@ -342,26 +279,15 @@ async def run_swarm(
             )
             for u in uavs
         ]
-        daemons = _Daemons(configs, opts.processes, tmp)
+        daemons = DaemonSet(configs, opts.processes, tmp)
         stack.push_async_callback(daemons.stop)
         await daemons.start()
 
-        wait_s = 60.0 if opts.processes else 30.0
+        # Start-up is CPU-bound (each process imports the runtime): allow for a loaded machine.
+        wait_s = (20.0 + 3.0 * len(uavs)) if opts.processes else (30.0 + 0.5 * len(uavs))
         missing = await runner.wait_alive(uavs, wait_s)
         if missing:
             raise RuntimeError(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
-        roster = sorted(runner.alive)
-        if plan_factory is not None:
-            plan = await plan_factory(roster)
-        elif opts.mission_text is not None:
-            planner_llm = llm if opts.selector == "llm" else None
-            plan = await plan_from_text(opts.mission_text, roster, planner_llm, opts.top_k)
-        else:
-            plan = template_plan(opts.task, uavs, f"{opts.task}-s{opts.seed}")
-        if plan.task != opts.task:
-            raise ValueError(f"the mission is a {plan.task} mission but the world runs {opts.task}")
-        summary.setup_tokens = plan.setup_tokens
-        summary.mission = plan.as_dict()
         commander.publish(plan)
         board_ref["board"] = commander.board
         missing = await commander.wait_ready(plan.participants, wait_s)
@@ -371,7 +297,7 @@ async def run_swarm(
         try:
             for ep in range(opts.episodes):
                 result = await runner.run_episode(ep)
-                summary.episodes.append(_episode_dict(ep, result, commander.board))
+                summary.episodes.append(_episode_dict(ep, result, task))
                 if ep + 1 < opts.episodes:
                     # Let finalised experience reach same-role peers before the next episode.
                     await asyncio.sleep(0.3)
@@ -380,6 +306,8 @@ async def run_swarm(
             commander.end_mission("operator stop")
             runner.shutdown()
             raise
+        if opts.measure_rss:
+            summary.peak_rss_kb = daemons.peak_rss_kb()
         runner.shutdown()
         await daemons.stop()
         await asyncio.sleep(0.2)  # last reports
@@ -402,13 +330,14 @@ async def run_swarm(
         for e in summary.episodes:
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
         summary.tokens_by_agent = {
-            u: p.prompt_tokens + p.completion_tokens for u, p in sorted(board.uavs.items())
+            u: p.prompt_tokens + p.completion_tokens
+            for u, p in sorted(board.uavs.items(), key=lambda kv: natural(kv[0]))
         }
         by_role: dict[str, int] = {}
         for p in board.uavs.values():
             by_role[p.role] = by_role.get(p.role, 0) + p.prompt_tokens + p.completion_tokens
         summary.tokens_by_role = dict(sorted(by_role.items()))
-        summary.decision_latency_s = _percentiles(
+        summary.decision_latency_s = percentiles(
             [x for p in board.uavs.values() for x in p.latencies_s]
         )
     summary.wall_s = time.monotonic() - started
@@ -418,3 +347,6 @@ async def run_swarm(
 def write_json(summary: RunSummary, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(summary.as_dict(), indent=2, default=str) + "\n", encoding="utf-8")
+
+
+__all__ = ["RunSummary", "SwarmOptions", "percentiles", "run_swarm", "world_task", "write_json"]

@@ -1,9 +1,11 @@
 """The kinematic world: point-mass UAVs at a fixed altitude in a local NED frame.
 
-This is the simulator's physics and nothing else (no tasks, rewards or networking), so the
-benchmark, the sim vehicle backend and the MAVLink emulator can all share one definition of
-motion. It reproduces the authors' substrate (notes/mpe-tasks.md): a 140 x 140 m arena centred
-on (0, 0), 0.5 s rounds integrated as 10 ticks of 0.05 s, motion commands that persist until
+This is physics and nothing else (no tasks, rewards or networking). It lives at the top of
+the package, below both the simulator and the task definitions, so the task platform
+(``aeroweaver_edge.tasks``, which the Commander reads too), the simulator, the benchmark and
+a future MAVLink emulator share one definition of motion without importing each other.
+It reproduces the authors' substrate (notes/mpe-tasks.md): a 140 x 140 m arena centred on
+(0, 0), 0.5 s rounds integrated as 10 ticks of 0.05 s, motion commands that persist until
 changed.
 
 Model, per tick of ``dt`` (semi-implicit Euler):
@@ -30,10 +32,18 @@ from dataclasses import dataclass
 from typing import Final
 
 from aeroweaver_edge.config import SimConfig
+from aeroweaver_edge.defaults import (
+    ALTITUDE_M,
+    ARENA_HALF_M,
+    MAX_ACCEL_MPS2,
+    MAX_SPEED_MPS,
+    ROUND_S,
+    SENSING_RADIUS_M,
+)
 from aeroweaver_edge.wire import Entity, Vec3
 
-ARENA_HALF_M: Final = 70.0
-"""Half the side of the authors' 140 x 140 m arena, centred on the origin."""
+__all__ = ["ARENA_HALF_M", "SUBSTEP_S", "Body", "KinematicWorld", "steer"]
+
 SUBSTEP_S: Final = 0.05
 """Physics tick used by the authors (10 ticks per 0.5 s round)."""
 
@@ -56,6 +66,7 @@ class Body:
     sp_e: float = 0.0
     role: str = ""
     absent: bool = False  # daemon died or missed its deadline: holds, ignores commands
+    max_speed: float | None = None  # per-body cap (e.g. the faster evader); None: the world's
 
     @property
     def pos(self) -> Vec3:
@@ -88,12 +99,12 @@ class KinematicWorld:
     def __init__(
         self,
         *,
-        altitude_m: float = 5.0,
-        max_speed_mps: float = 11.0,
-        max_accel_mps2: float = 30.0,
-        round_s: float = 0.5,
+        altitude_m: float = ALTITUDE_M,
+        max_speed_mps: float = MAX_SPEED_MPS,
+        max_accel_mps2: float = MAX_ACCEL_MPS2,
+        round_s: float = ROUND_S,
         substep_s: float = SUBSTEP_S,
-        sensing_radius_m: float = 45.0,
+        sensing_radius_m: float = SENSING_RADIUS_M,
         arena_half_m: float = ARENA_HALF_M,
     ) -> None:
         for name, value in (
@@ -136,14 +147,27 @@ class KinematicWorld:
         """The NED down coordinate of the flight level (negative: above ground)."""
         return -self.altitude_m
 
-    def add_uav(self, uav: str, pos: Vec3 | tuple[float, float], role: str = "") -> Body:
-        """Place a UAV at rest at ``pos`` (north, east[, down]); down is set to the flight level."""
+    def add_uav(
+        self,
+        uav: str,
+        pos: Vec3 | tuple[float, float],
+        role: str = "",
+        *,
+        max_speed: float | None = None,
+    ) -> Body:
+        """Place a UAV at rest at ``pos`` (north, east[, down]); down is set to the flight level.
+
+        ``max_speed`` overrides the world's speed cap for this body only."""
         if uav in self._bodies or uav in self._entities:
             raise ValueError(f"duplicate id {uav!r}")
         north, east = float(pos[0]), float(pos[1])
         if not _finite(north, east):
             raise ValueError(f"non-finite position for {uav!r}: {pos!r}")
-        body = Body(id=uav, north=north, east=east, down=self.down_m, role=role)
+        if max_speed is not None and not (math.isfinite(max_speed) and max_speed > 0):
+            raise ValueError(f"max_speed must be a positive finite number, got {max_speed!r}")
+        body = Body(
+            id=uav, north=north, east=east, down=self.down_m, role=role, max_speed=max_speed
+        )
         self._bodies[uav] = body
         return body
 
@@ -193,11 +217,15 @@ class KinematicWorld:
             raise ValueError(f"non-finite velocity for {uav!r}: {vel!r}")
         if body.absent:
             return False
+        cap = self.speed_cap(body)
         speed = math.hypot(n, e)
-        if speed > self.max_speed:
-            n, e = n * self.max_speed / speed, e * self.max_speed / speed
+        if speed > cap:
+            n, e = n * cap / speed, e * cap / speed
         body.sp_n, body.sp_e = n, e
         return True
+
+    def speed_cap(self, body: Body) -> float:
+        return self.max_speed if body.max_speed is None else body.max_speed
 
     def hold(self, uav: str) -> None:
         """Zero the setpoint; the UAV decelerates at the acceleration limit and stops."""
@@ -223,10 +251,9 @@ class KinematicWorld:
         n_ticks = max(1, round(total / self.substep_s))
         dt = total / n_ticks
         dv_max = self.max_accel * dt
-        v_max = self.max_speed
-        bodies = list(self._bodies.values())
+        bodies = [(b, self.speed_cap(b)) for b in self._bodies.values()]
         for _ in range(n_ticks):
-            for b in bodies:
+            for b, v_max in bodies:
                 dvn, dve = b.sp_n - b.vn, b.sp_e - b.ve
                 dv = math.hypot(dvn, dve)
                 if dv > dv_max:
@@ -279,3 +306,18 @@ class KinematicWorld:
                 if math.hypot(a.north - b.north, a.east - b.east) < threshold_m:
                     count += 1
         return count
+
+
+def steer(
+    pos: Vec3, target: Vec3 | tuple[float, float], max_speed: float, horizon_s: float
+) -> Vec3:
+    """The horizontal velocity that flies from ``pos`` toward ``target`` within one horizon:
+    along the line, at ``max_speed`` or slower so the body does not overshoot in
+    ``horizon_s``. The same conversion the safety gate applies to a ``MoveTo`` (without its
+    envelope checks), used for the agents the world itself flies."""
+    dn, de = target[0] - pos[0], target[1] - pos[1]
+    dist = math.hypot(dn, de)
+    if dist < 1e-9:
+        return (0.0, 0.0, 0.0)
+    speed = min(max_speed, dist / horizon_s)
+    return (dn / dist * speed, de / dist * speed, 0.0)

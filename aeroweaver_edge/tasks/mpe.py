@@ -16,7 +16,13 @@ Entities are never re-created or deep-copied: mpe2's collision loops compare age
 identity (``a != agent``), and rebuilding worlds per call would cost ~100 µs each.
 
 mpe2 is imported lazily (the first scenario import pulls pygame and takes ~0.3 s), and
-``PYGAME_HIDE_SUPPORT_PROMPT`` is set before that import so pygame prints no banner.
+``PYGAME_HIDE_SUPPORT_PROMPT`` is set before that import so pygame prints no banner. A daemon
+process never builds a reward model, so it never imports mpe2, pygame or scipy.
+
+Scaling (notes/mpe-tasks.md): 70 m per unit, x = north, y = east, arena centre at the
+origin, for every task except the two formations, which follow the authors' option A: each
+formation is normalised to mpe2's native target size (circle: centre on the centre marker,
+R / 0.5 metres per unit; line: centre between the outer slots, span / 1.25 metres per unit).
 """
 
 from __future__ import annotations
@@ -25,12 +31,11 @@ import importlib
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any
 
-import numpy as np
+from aeroweaver_edge.defaults import MPE_UNIT_M
 
-MPE_UNIT_M: Final = 70.0
-"""Metres per MPE unit: the 140 m arena maps onto [-1, 1]², where MPE resets live."""
+__all__ = ["MPE_UNIT_M", "MpeRewardModel", "UnitScale", "scenario_class"]
 
 
 def _import_mpe2(module: str) -> Any:
@@ -91,6 +96,8 @@ class MpeRewardModel:
         Positions are overwritten by :meth:`place` before scoring, so the seed only matters
         for scenarios whose reset draws hidden information (goals); tasks overwrite those too.
         """
+        import numpy as np  # with mpe2: only a process that scores rewards pays for it
+
         self.scenario.reset_world(self.world, np.random.default_rng(seed))
 
     def place(self, entity: Any, north: float, east: float) -> None:
@@ -109,59 +116,3 @@ class MpeRewardModel:
         return [
             global_reward * (1 - rho) + float(scenario.reward(a, world)) * rho for a in world.agents
         ]
-
-
-class SpreadRewards:
-    """``simple_spread`` (coverage) rewards: ``0.5 * global + 0.5 * collisions_i`` at ρ = 0.5.
-
-    ``global = -Σ_landmarks min_agents d`` and the local term is ``-1`` per other agent closer
-    than 0.30 units (21 m). Constructed with mpe2 1.1.1's defaults (``curriculum=False``:
-    the collision penalty is always on; ``CAPTURE_RADIUS`` only affects the optional
-    ``terminate_on_success`` and never the reward), matching ``simple_spread_v3`` defaults.
-
-    ``n_landmarks`` may differ from ``n_agents`` (mpe2 ties them): the world is made with
-    ``max(n_agents, n_landmarks)`` entities of each kind and the surplus dropped before reset,
-    which leaves every remaining entity exactly as mpe2 configures it.
-    """
-
-    def __init__(
-        self,
-        n_agents: int,
-        n_landmarks: int = 3,
-        *,
-        local_ratio: float = 0.5,
-        scale: UnitScale | None = None,
-    ) -> None:
-        if n_agents < 1 or n_landmarks < 1:
-            raise ValueError("simple_spread needs at least one agent and one landmark")
-        model = MpeRewardModel(
-            "simple_spread",
-            make_world_args=(max(n_agents, n_landmarks),),
-            local_ratio=local_ratio,
-            scale=scale,
-        )
-        world = model.world
-        world.agents = world.agents[:n_agents]
-        world.landmarks = world.landmarks[:n_landmarks]
-        model.reset()
-        self.model = model
-        self.n_agents = n_agents
-        self.n_landmarks = n_landmarks
-
-    def __call__(
-        self,
-        agents: Sequence[tuple[float, float]],
-        landmarks: Sequence[tuple[float, float]],
-    ) -> list[float]:
-        """Rewards for agents at ``agents`` (north, east metres) given ``landmarks``."""
-        if len(agents) != self.n_agents or len(landmarks) != self.n_landmarks:
-            raise ValueError(
-                f"expected {self.n_agents} agents and {self.n_landmarks} landmarks, "
-                f"got {len(agents)} and {len(landmarks)}"
-            )
-        model = self.model
-        for ent, (n, e) in zip(model.world.agents, agents, strict=True):
-            model.place(ent, n, e)
-        for ent, (n, e) in zip(model.world.landmarks, landmarks, strict=True):
-            model.place(ent, n, e)
-        return model.evaluate()

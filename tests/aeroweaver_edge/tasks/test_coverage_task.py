@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 
 from aeroweaver_edge.config import SimConfig
-from aeroweaver_edge.sim.tasks import make_task
-from aeroweaver_edge.sim.tasks.coverage import LANDMARKS_NE, CoverageTask, spawn_base
-from aeroweaver_edge.sim.world import KinematicWorld
+from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.tasks import UnknownTask, create
+from aeroweaver_edge.tasks.coverage import LANDMARKS_NE, Coverage
+from aeroweaver_edge.tasks.layout import spawn_base
 
 
-def world_for(seed: int, n: int = 3) -> tuple[CoverageTask, KinematicWorld]:
-    task = CoverageTask(n)
+def world_for(seed: int, n: int = 3) -> tuple[Coverage, KinematicWorld]:
+    task = Coverage(n)
     return task, task.build_world(np.random.default_rng(seed), SimConfig(uavs=n))
 
 
@@ -50,7 +51,7 @@ def test_uavs_spawn_near_the_authors_row_with_jitter() -> None:
             assert body.vel == (0.0, 0.0, 0.0)
 
 
-@pytest.mark.parametrize("n", range(1, 11))
+@pytest.mark.parametrize("n", [*range(1, 11), 25, 50])
 def test_layout_stays_in_arena_without_near_collisions(n: int) -> None:
     for seed in range(10):
         task, world = world_for(seed, n)
@@ -61,6 +62,19 @@ def test_layout_stays_in_arena_without_near_collisions(n: int) -> None:
             assert world.in_arena(entity.pos)
         assert world.near_collisions() == 0
         assert task.metrics(world)["near_collisions"] == 0.0
+        landmarks = [e.pos for e in world.entities()]
+        assert len(landmarks) == n  # N landmarks, as mpe2's simple_spread_v3(N)
+        assert (
+            min(
+                (
+                    math.dist(a[:2], b[:2])
+                    for i, a in enumerate(landmarks)
+                    for b in landmarks[i + 1 :]
+                ),
+                default=99.0,
+            )
+            >= 7.0
+        )
 
 
 def test_roles_and_visibility() -> None:
@@ -85,42 +99,48 @@ def place_on_landmarks(world: KinematicWorld, miss_m: float = 0.0) -> None:
 
 def test_complete_needs_every_landmark_within_3_m() -> None:
     task, world = world_for(5)
-    assert not task.complete(world)
+    assert not task.complete(world, 1)
     place_on_landmarks(world, 2.999)
-    assert task.complete(world)
+    assert task.complete(world, 1)
     metrics = task.metrics(world)
     assert metrics["covered_landmarks"] == 3.0
     assert metrics["landmark_min_dist_m.L0"] == pytest.approx(2.999)
     place_on_landmarks(world, 3.01)
-    assert not task.complete(world)
+    assert not task.complete(world, 1)
     assert task.metrics(world)["covered_landmarks"] == 0.0
     place_on_landmarks(world)
     world.body("uav2").east += 50.0
-    assert not task.complete(world)
+    assert not task.complete(world, 1)
     assert task.metrics(world)["covered_landmarks"] == 2.0
 
 
-def test_more_uavs_keep_three_landmarks() -> None:
+def test_fewer_than_three_uavs_use_the_first_authors_landmarks() -> None:
+    for n in (1, 2):
+        _, world = world_for(4, n)
+        _, world3 = world_for(4, 3)
+        assert [e.pos for e in world.entities()] == [e.pos for e in world3.entities()][:n]
+
+
+def test_more_uavs_get_more_landmarks_and_keep_the_authors_three() -> None:
     task, world = world_for(1, 5)
-    assert len(list(world.entities())) == 3
+    _, world3 = world_for(1, 3)
+    lms = [e.pos for e in world.entities()]
+    assert len(lms) == 5
+    assert lms[:3] == [e.pos for e in world3.entities()]  # same draws first, extras after
     rewards = task.rewards(world)
     assert list(rewards) == [f"uav{i}" for i in range(5)]
     assert all(math.isfinite(r) and r < 0 for r in rewards.values())
 
 
-def test_spawn_with_another_count_resizes_the_task() -> None:
-    task, world = world_for(1, 3)
-    task.rewards(world)
-    world4 = task.build_world(np.random.default_rng(1), SimConfig(uavs=4))
-    assert task.n_uavs == 4
-    assert len(task.rewards(world4)) == 4
-
-
-def test_make_task_and_errors() -> None:
-    assert isinstance(make_task("coverage", 2), CoverageTask)
-    with pytest.raises(ValueError, match="known: coverage"):
-        make_task("nope")
-    with pytest.raises(ValueError, match="n_uavs"):
-        CoverageTask(0)
+def test_create_and_errors() -> None:
+    assert isinstance(create("coverage", 2), Coverage)
+    with pytest.raises(UnknownTask, match="known: coverage"):
+        create("nope")
+    with pytest.raises(ValueError, match="coverage needs 1 to 50 UAVs"):
+        Coverage(0)
+    with pytest.raises(ValueError, match="coverage needs 1 to 50 UAVs"):
+        Coverage(51)
     with pytest.raises(ValueError, match="altitude"):
-        CoverageTask(3).build_world(np.random.default_rng(0), SimConfig(altitude_m=9.0))
+        Coverage(3).build_world(np.random.default_rng(0), SimConfig(altitude_m=9.0))
+    with pytest.raises(ValueError, match="config flies 4 UAVs"):
+        Coverage(3).build_world(np.random.default_rng(0), SimConfig(uavs=4))

@@ -1,0 +1,158 @@
+"""The receive side every PeerChannel shares: acceptance, the reach rule, waiting, ordering.
+
+Both the Zenoh ``PeerLink`` and the in-memory channel feed arriving messages into one
+``Inbox`` after their transport checks (key vs sender, recipient, roster, replay), so what a
+UAV accepts and when is written once:
+
+* a message enters the round after the one it was sent in (``collect(max_round=t-1)``);
+* it is accepted only if it *reaches* this UAV: the routing rule (``set_routing``) applied
+  to the sender's role, this UAV's role and the distance between the sender's position in
+  the message and this UAV's own position in the round the message was sent (remembered
+  from its beacon). Lockstep simulation therefore judges range on the same frozen positions
+  in every run, without any sender waiting for anyone's beacon;
+* expected messages (the simulator's manifest) are waited for, bounded; missing ones are
+  counted; the result is sorted by (sender, sequence).
+
+Every check drops and counts instead of raising: a bad message never stops the round loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+from aeroweaver_edge.defaults import COMM_RADIUS_M
+from aeroweaver_edge.ports import Reach
+from aeroweaver_edge.wire import InboxMessage, MsgRef, Vec3
+
+log = logging.getLogger(__name__)
+
+ARRIVED_MEMORY = 4096  # (sender, seq) pairs remembered so an early arrival is not "missing"
+POSITION_MEMORY = 16  # rounds of own positions kept for judging late messages
+
+
+@dataclass
+class PeerStats:
+    """Counters for reports and tests. ``dropped``: not sent; ``rejected``: not accepted."""
+
+    sent: int = 0
+    dropped: Counter[str] = field(default_factory=Counter)
+    received: int = 0
+    rejected: Counter[str] = field(default_factory=Counter)
+    missing: int = 0  # expected messages that had not arrived when collect gave up
+
+
+def within(radius_m: float = COMM_RADIUS_M) -> Reach:
+    """The routing rule with no task: everyone reaches everyone within the radius."""
+
+    def rule(sender_role: str, receiver_role: str, distance_m: float) -> bool:
+        return distance_m <= radius_m
+
+    return rule
+
+
+class Inbox:
+    """One UAV's queue of received messages and the rule that decides which count."""
+
+    def __init__(self, uav: str, comm_radius_m: float = COMM_RADIUS_M) -> None:
+        if comm_radius_m <= 0:
+            raise ValueError(f"comm_radius_m must be > 0, got {comm_radius_m}")
+        self.uav = uav
+        self.stats = PeerStats()
+        self.role = ""
+        self.reach: Reach = within(comm_radius_m)
+        self._positions: dict[int, Vec3] = {}
+        self._pending: list[InboxMessage] = []
+        self._arrived: dict[tuple[str, int], None] = {}  # insertion-ordered, bounded
+        self._waiters: set[asyncio.Future[None]] = set()
+
+    def set_routing(self, role: str, reach: Reach) -> None:
+        self.role = role
+        self.reach = reach
+
+    def note_position(self, round: int, pos: Vec3) -> None:
+        """This UAV's own position in ``round`` (from its beacon)."""
+        self._positions[round] = pos
+        while len(self._positions) > POSITION_MEMORY:
+            del self._positions[min(self._positions)]
+
+    def reject(self, reason: str, what: str) -> None:
+        self.stats.rejected[reason] += 1
+        log.debug("%s: rejected %s (%s)", self.uav, what, reason)
+
+    def offer(self, msg: InboxMessage) -> None:
+        """A message that passed the transport's checks: queue it and wake waiters."""
+        self.stats.received += 1
+        self._pending.append(msg)
+        self._arrived[(msg.h.sender, msg.h.seq)] = None
+        if len(self._arrived) > ARRIVED_MEMORY:
+            del self._arrived[next(iter(self._arrived))]
+        self.notify()
+
+    def _reaches(self, msg: InboxMessage) -> str | None:
+        """Why ``msg`` does not reach this UAV, or None if it does."""
+        own = self._positions.get(msg.round)
+        if own is None:
+            return "no_own_position"
+        if msg.sender_pos is None or not all(math.isfinite(x) for x in msg.sender_pos):
+            return "no_sender_position"
+        d = math.hypot(own[0] - msg.sender_pos[0], own[1] - msg.sender_pos[1])
+        return None if self.reach(msg.sender_role, self.role, d) else "out_of_range"
+
+    async def collect(
+        self,
+        expect: Iterable[MsgRef] = (),
+        timeout_s: float = 1.0,
+        *,
+        max_round: int | None = None,
+    ) -> list[InboxMessage]:
+        want = {(ref.sender, ref.seq) for ref in expect}
+        if not await self.wait_until(lambda: want <= self._arrived.keys(), timeout_s):
+            missing = sorted(want - self._arrived.keys())
+            self.stats.missing += len(missing)
+            log.info("%s: %d expected message(s) missing: %s", self.uav, len(missing), missing)
+        if max_round is None:
+            ready, self._pending = self._pending, []
+        else:
+            ready = [m for m in self._pending if m.round <= max_round]
+            self._pending = [m for m in self._pending if m.round > max_round]
+        out = []
+        for m in ready:
+            why = self._reaches(m)
+            if why is None:
+                out.append(m)
+            else:
+                self.reject(why, f"{m.h.sender}#{m.h.seq}")
+        out.sort(key=lambda m: (m.h.sender, m.h.seq))
+        return out
+
+    # -- waiting ----------------------------------------------------------------------------
+
+    def notify(self) -> None:
+        for fut in self._waiters:
+            if not fut.done():
+                fut.set_result(None)
+        self._waiters.clear()
+
+    async def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        """Re-check ``predicate`` on every state change until it holds or time runs out."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while not predicate():
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                return False
+            fut: asyncio.Future[None] = loop.create_future()
+            self._waiters.add(fut)
+            try:
+                await asyncio.wait({fut}, timeout=remaining)
+            finally:
+                self._waiters.discard(fut)
+        return True
+
+
+__all__ = ["Inbox", "PeerStats", "within"]

@@ -1,0 +1,116 @@
+"""Start and stop a swarm's daemons: as tasks in this event loop or as OS processes.
+
+A process is started with ``aeroweaver daemon --config <json>`` through ``spawn``-style
+``asyncio.create_subprocess_exec`` (never fork after a Zenoh session). Its peak resident
+memory (``VmHWM``) can be read while it runs, for the scale benchmark.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import sys
+from pathlib import Path
+from typing import Any
+
+from aeroweaver_edge.config import UavConfig
+
+
+def peak_rss_kb(pid: int) -> int | None:
+    """``VmHWM`` of a live process in kB (Linux), or None if it cannot be read."""
+    try:
+        text = Path(f"/proc/{pid}/status").read_text(encoding="ascii", errors="replace")
+    except OSError:
+        return None
+    for line in text.splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1])
+    return None
+
+
+class DaemonSet:
+    """The daemons of one run; in-process tasks share one skill registry."""
+
+    def __init__(self, configs: list[UavConfig], processes: bool, workdir: Path) -> None:
+        self.configs = configs
+        self.processes = processes
+        self.workdir = workdir
+        self.tasks: dict[str, asyncio.Task[Any]] = {}
+        self.procs: dict[str, asyncio.subprocess.Process] = {}
+
+    async def start(self) -> None:
+        if not self.processes:
+            from aeroweaver_edge.app import run_daemon
+            from aeroweaver_edge.skills import load_skills
+
+            registry = load_skills()
+            for cfg in self.configs:
+                self.tasks[cfg.uav] = asyncio.create_task(
+                    run_daemon(cfg, registry=registry), name=cfg.uav
+                )
+            return
+        for cfg in self.configs:
+            path = self.workdir / f"{cfg.uav}.json"
+            path.write_text(cfg.model_dump_json(indent=2), encoding="utf-8")
+            log = (self.workdir / f"{cfg.uav}.log").open("wb")  # the child inherits it
+            self.procs[cfg.uav] = await asyncio.create_subprocess_exec(
+                sys.executable,
+                "-m",
+                "aeroweaver_edge.cli",
+                "daemon",
+                "--config",
+                str(path),
+                stdin=asyncio.subprocess.DEVNULL,
+                stdout=log,
+                stderr=log,
+            )
+            log.close()
+
+    def peak_rss_kb(self) -> dict[str, int]:
+        """Peak resident memory of every daemon process still running (processes mode)."""
+        out: dict[str, int] = {}
+        for uav, p in self.procs.items():
+            kb = peak_rss_kb(p.pid) if p.returncode is None else None
+            if kb is not None:
+                out[uav] = kb
+        return out
+
+    async def kill(self, uav: str) -> None:
+        """Fault injection: the daemon dies abruptly (process SIGKILL, or task cancelled)."""
+        if uav in self.procs:
+            self.procs[uav].kill()
+            await self.procs[uav].wait()
+        elif uav in self.tasks:
+            self.tasks[uav].cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await self.tasks[uav]
+
+    def failed(self) -> dict[str, str]:
+        """Daemons that ended before the run did, with the reason."""
+        out: dict[str, str] = {}
+        for uav, t in self.tasks.items():
+            if t.done() and not t.cancelled() and t.exception() is not None:
+                out[uav] = repr(t.exception())
+        for uav, p in self.procs.items():
+            if p.returncode not in (None, 0):
+                tail = (self.workdir / f"{uav}.log").read_text(errors="replace")[-2000:]
+                out[uav] = f"exit {p.returncode}: {tail}"
+        return out
+
+    async def stop(self, timeout_s: float = 15.0) -> None:
+        waits = [*self.tasks.values()]
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout_s):
+                await asyncio.gather(
+                    *waits, *(p.wait() for p in self.procs.values()), return_exceptions=True
+                )
+        for t in self.tasks.values():
+            t.cancel()
+        await asyncio.gather(*self.tasks.values(), return_exceptions=True)
+        for p in self.procs.values():
+            if p.returncode is None:
+                p.kill()
+                await p.wait()
+
+
+__all__ = ["DaemonSet", "peak_rss_kb"]

@@ -1,0 +1,50 @@
+"""One LLM endpoint for a whole simulated run: the configured one or the embedded server."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import AsyncIterator
+from typing import Literal
+
+from aeroweaver_edge.config import LLMConfig
+
+Source = Literal["scripted", "endpoint", "embedded"]
+
+HONESTY_NOTE: dict[Source, str] = {
+    "scripted": "Decisions come from the task's scripted reference policy, not an LLM: these "
+    "returns are a sanity bound and say nothing about LLM quality.",
+    "embedded": "Decisions come from SmolLM2-135M (embedded plumbing demo; strong position bias, "
+    "no useful judgement): these returns are not evidence about LLM-driven swarm performance.",
+    "endpoint": "Decisions come from the configured LLM endpoint.",
+}
+
+
+@contextlib.asynccontextmanager
+async def shared_llm(llm: LLMConfig, *, needed: bool) -> AsyncIterator[tuple[LLMConfig, Source]]:
+    """The endpoint every daemon (and the Commander) uses: ``llm`` when it names a URL, else
+    the embedded server, started here and stopped on exit. ``needed=False``: no LLM at all."""
+    if not needed:
+        yield llm, "scripted"
+        return
+    if llm.base_url is not None:
+        yield llm, "endpoint"
+        return
+    from aeroweaver_edge.llm.embedded import EmbeddedServer
+
+    async with EmbeddedServer() as server:
+        yield (
+            llm.model_copy(update={"base_url": server.base_url, "model": server.model}),
+            "embedded",
+        )
+
+
+async def probe(llm: LLMConfig) -> str:
+    """The endpoint probe's one-line verdict."""
+    from aeroweaver_edge.llm.client import ChatClient
+    from aeroweaver_edge.llm.probe import probe_endpoint
+
+    async with ChatClient.from_config(llm) as client:
+        return (await probe_endpoint(client)).summary()
+
+
+__all__ = ["HONESTY_NOTE", "Source", "probe", "shared_llm"]

@@ -1,0 +1,118 @@
+"""``aeroweaver mission start``: plan a mission for the daemons that are up, publish it and
+watch it to its end; with ``sim_world`` also run the kinematic world for daemons on the sim
+backend, flying the plan's task with the plan's roles.
+
+The mission text is parsed once, against the live roster. The Commander never flies: it
+publishes context and assignments and reads reports. Ending the mission (termination,
+horizon or Ctrl-C) publishes the ended context, so every UAV holds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from aeroweaver_edge import defaults as d
+from aeroweaver_edge.config import LLMConfig, MeshConfig, SimConfig
+from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.orchestration.planning import natural
+from aeroweaver_edge.orchestration.swarm import world_task
+from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
+from commander.commander import Commander
+from commander.harness import plan_from_text
+from commander.mission_start import discover_roster, progress_row, watch_until
+from commander.progress import ProgressBoard
+
+
+@dataclass(frozen=True)
+class MissionStartOptions:
+    text: str
+    swarm: str = "default"
+    mesh: MeshConfig = field(default_factory=MeshConfig)
+    llm: LLMConfig | None = None  # None: rule-based parsing and template roles only
+    roster_wait_s: float = 3.0
+    top_k: int = d.TOP_K
+    sim_world: bool = False
+    seed: int = 1
+    episodes: int = 1
+    max_rounds: int = d.MAX_ROUNDS
+    deadline_s: float = d.DEADLINE_S
+
+
+async def start_mission(
+    opts: MissionStartOptions,
+    on_round: Callable[[RoundLog, ProgressBoard], Awaitable[None]] | None = None,
+) -> dict[str, Any]:
+    started = time.monotonic()
+    out: dict[str, Any] = {"text": opts.text, "episodes": [], "ended": "not started"}
+    async with contextlib.AsyncExitStack() as stack:
+        mesh = await Mesh.open(opts.mesh, node_id="cmdr")
+        stack.push_async_callback(mesh.aclose)
+        roster = await discover_roster(mesh, opts.swarm, opts.roster_wait_s)
+        if not roster:
+            raise RuntimeError(
+                f"no UAV daemon of swarm {opts.swarm!r} is up (waited {opts.roster_wait_s:.0f} s)"
+            )
+        out["roster"] = roster
+        plan = await plan_from_text(opts.text, roster, opts.llm, opts.top_k)
+        out["mission"] = plan.as_dict()
+        commander = Commander(mesh, opts.swarm)
+        await commander.start()
+        stack.push_async_callback(commander.aclose)
+        commander.publish(plan)
+        try:
+            missing = await commander.wait_ready(plan.participants, 10.0)
+            out["not_ready"] = sorted(missing)
+            if opts.sim_world:
+                task = world_task(plan, opts.max_rounds)
+                cfg = SimConfig(
+                    task=plan.task, uavs=task.n_uavs, seed=opts.seed,
+                    max_rounds=opts.max_rounds, deadline_s=opts.deadline_s,
+                )  # fmt: skip
+
+                async def hook(log: RoundLog) -> None:
+                    if on_round is not None:
+                        await on_round(log, commander.board)
+
+                runner = WorldRunner(mesh, opts.swarm, task, cfg, on_round=hook)
+                await runner.start()
+                stack.push_async_callback(runner.aclose)
+                await runner.wait_alive(plan.participants, 10.0)
+                for ep in range(opts.episodes):
+                    res = await runner.run_episode(ep)
+                    out["episodes"].append(
+                        {"episode": ep, "rounds": res.rounds, "reason": res.reason,
+                         "team_return": res.team_mean_return,
+                         "agent_returns": {u: res.returns[u] for u in task.uav_ids},
+                         "scripted_returns": {b: res.returns[b] for b in task.scripted_ids}}
+                    )  # fmt: skip
+                out["ended"] = (
+                    "complete"
+                    if all(e["reason"] == "complete" for e in out["episodes"])
+                    else "horizon"
+                )
+            else:
+                await watch_until(commander, plan.participants, opts.max_rounds)
+                out["ended"] = "horizon"
+        except asyncio.CancelledError:
+            # Ctrl-C / SIGTERM is the operator's stop: end the mission cleanly and report.
+            out["ended"] = "operator stop"
+            current = asyncio.current_task()
+            if current is not None:
+                current.uncancel()
+        finally:
+            commander.end_mission(str(out["ended"]))
+            out["progress"] = {
+                u: progress_row(p)
+                for u, p in sorted(commander.board.uavs.items(), key=lambda kv: natural(kv[0]))
+            }
+            await asyncio.sleep(0.2)  # let the ended context leave before the session closes
+    out["wall_s"] = round(time.monotonic() - started, 3)
+    return out
+
+
+__all__ = ["MissionStartOptions", "start_mission"]
