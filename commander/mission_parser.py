@@ -153,16 +153,13 @@ _NEGATED = re.compile(r"\b(?:no|not|never|nor)\s+(?:\w+\s+)?$|n't\s+(?:\w+\s+)?$
 _TOTAL_ONE = re.compile(rf"\b(?:with|using|use|only|just)\s+(?:one|a single|1)\s+{_UAV_NOUN}")
 
 
-
 def _role_nouns(task: str) -> dict[str, str]:
     """Role nouns as operators say them (regex) -> the task role they count, from the specs."""
     return {r.nouns: r.name for r in get_spec(task).all_roles if r.nouns}
 
 
 # (pattern, weight) per task, from each task's spec: 2 = names the task on its own, 1 = support
-_CUES = {
-    name: tuple((re.compile(p), w) for p, w in spec.cues) for name, spec in specs().items()
-}
+_CUES = {name: tuple((re.compile(p), w) for p, w in spec.cues) for name, spec in specs().items()}
 
 _CONSTRAINT_CUE = re.compile(
     r"\b(?:avoid|keep|don't|do not|must not|never|no two|without|stay|at least|at most|"
