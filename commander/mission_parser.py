@@ -8,8 +8,11 @@ missing or invalid, or it contradicts what the rules read unambiguously in the t
 type, stated number of drones). Every fallback records why. Without a client the rules are
 used directly. If neither understands the mission, ``MissionParseError`` says what is missing.
 
-The rules are deliberately plain regular expressions over the nine tasks' usual wording: they
-are a safety net that must behave the same way every time, not a language model.
+The rules are deliberately plain regular expressions over the nine tasks' usual wording (each
+task's ``cues`` in its spec): they are a safety net that must behave the same way every time,
+not a language model. When no cue names a task (or cues tie), the text is matched against the
+tasks' own descriptions with BM25 and a task is taken only with a clear margin; otherwise the
+parser refuses, naming what is missing.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import json
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cache
 from typing import Any, Literal
 
 from pydantic import ValidationError
@@ -26,6 +30,7 @@ from aeroweaver_edge.defaults import ARENA_HALF_M
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
 from aeroweaver_edge.tasks import get_spec, specs
+from commander.retrieval import BM25Index
 from commander.task_record import TASK_TYPES, TaskRecord, validation_summary
 
 PARSE_MAX_TOKENS = 300  # a full record is ~60-150 tokens
@@ -221,6 +226,41 @@ def guess_task(text: str) -> TaskGuess:
     return TaskGuess(scores, matched)
 
 
+BM25_MIN_SCORE = 1.5
+"""The best task's BM25 score must reach this (about one distinctive word in common)..."""
+BM25_MARGIN = 1.5
+"""...and be this many times the runner-up's; otherwise the parser refuses."""
+
+
+@dataclass(frozen=True)
+class DescriptionMatch:
+    """BM25 over the task specs' wording: the task it settles on (or None) and the scores."""
+
+    task: str | None
+    scores: tuple[tuple[str, float], ...]
+
+
+@cache
+def _task_index() -> BM25Index:
+    return BM25Index([spec.corpus_text() for spec in specs().values()])
+
+
+def match_description(text: str, among: Sequence[str] = TASK_TYPES) -> DescriptionMatch:
+    """When no keyword decides, read the mission against every task's description, summary,
+    keywords and role goals (BM25). A task is chosen only with a clear margin: refusing is
+    better than guessing wrong."""
+    raw = _task_index().scores(text)
+    names = list(specs())
+    scores = sorted(
+        ((names[i], float(raw[i])) for i in range(len(names)) if names[i] in among),
+        key=lambda x: (-x[1], x[0]),
+    )
+    best = scores[0] if scores else None
+    second = scores[1][1] if len(scores) > 1 else 0.0
+    ok = best is not None and best[1] >= BM25_MIN_SCORE and best[1] >= BM25_MARGIN * second
+    return DescriptionMatch(best[0] if ok and best else None, tuple(scores))
+
+
 def _num(word: str) -> int:
     return int(word) if word.isdigit() else _NUM_WORDS[word]
 
@@ -364,11 +404,13 @@ def parse_fallback(text: str, roster: Sequence[str]) -> TaskRecord:
     guess = guess_task(text)
     task = guess.best
     if task is None:
+        ranked = guess.ranked
+        tied = [t for t, s in ranked if s == ranked[0][1]] if ranked else list(TASK_TYPES)
+        task = match_description(text, tied).task
+    if task is None:
         quoted = " ".join(text.split())
         quoted = quoted if len(quoted) <= 80 else quoted[:79] + "…"
-        ranked = guess.ranked
         if ranked:
-            tied = [t for t, s in ranked if s == ranked[0][1]]
             raise MissionParseError(
                 f"task type is ambiguous in {quoted!r}: it reads as {' and '.join(tied)} "
                 f"equally; say which task is meant"
@@ -514,6 +556,7 @@ async def parse_mission(
 
 
 __all__ = [
+    "DescriptionMatch",
     "JsonAnswer",
     "MissionParseError",
     "ParseOutcome",
@@ -521,6 +564,7 @@ __all__ = [
     "ask_json",
     "first_json_object",
     "guess_task",
+    "match_description",
     "parse_constraints",
     "parse_fallback",
     "parse_messages",

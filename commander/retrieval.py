@@ -75,8 +75,43 @@ class Hit:
         return self.doc.name
 
 
+class BM25Index:
+    """Okapi BM25 (Robertson et al.) with the non-negative Lucene IDF over plain texts."""
+
+    def __init__(self, texts: Sequence[str], *, k1: float = 1.2, b: float = 0.75) -> None:
+        self.k1, self.b = k1, b
+        tokens = [tokenize(t) for t in texts]
+        vocab = sorted({t for doc in tokens for t in doc})
+        self._index = {t: i for i, t in enumerate(vocab)}
+        tf = np.zeros((len(tokens), len(vocab)))
+        for row, doc in enumerate(tokens):
+            for term, n in Counter(doc).items():
+                tf[row, self._index[term]] = n
+        lengths = tf.sum(axis=1)
+        avg = float(lengths.mean()) if len(tokens) else 0.0
+        df = (tf > 0).sum(axis=0)
+        n_docs = len(tokens)
+        self._idf = np.log1p((n_docs - df + 0.5) / (df + 0.5))
+        norm = k1 * (1.0 - b + b * lengths / avg) if avg else np.ones_like(lengths)
+        # Precomputed term weights: score(q, d) = sum over q's terms of this matrix's column.
+        self._weights = self._idf * tf * (k1 + 1.0) / (tf + norm[:, None])
+        self.size = n_docs
+
+    def scores(self, query: str) -> np.ndarray:
+        """One BM25 score per document; each distinct query term counts once."""
+        cols = sorted({self._index[t] for t in tokenize(query) if t in self._index})
+        if not cols:
+            return np.zeros(self.size)
+        out: np.ndarray = self._weights[:, cols].sum(axis=1)
+        return out
+
+    def idf(self, term: str) -> float:
+        i = self._index.get(stem(term.lower()))
+        return float(self._idf[i]) if i is not None else math.nan
+
+
 class BM25Retriever:
-    """Okapi BM25 (Robertson et al.) with the non-negative Lucene IDF."""
+    """BM25 over skill documents (names, descriptions, tags, aliases; optionally the body)."""
 
     def __init__(
         self,
@@ -89,29 +124,11 @@ class BM25Retriever:
         self.docs: tuple[SkillDocument, ...] = tuple(docs)
         self.include_body = include_body
         self.k1, self.b = k1, b
-        tokens = [tokenize(document_text(d, include_body)) for d in self.docs]
-        vocab = sorted({t for doc in tokens for t in doc})
-        self._index = {t: i for i, t in enumerate(vocab)}
-        tf = np.zeros((len(self.docs), len(vocab)))
-        for row, doc in enumerate(tokens):
-            for term, n in Counter(doc).items():
-                tf[row, self._index[term]] = n
-        lengths = tf.sum(axis=1)
-        avg = float(lengths.mean()) if len(self.docs) else 0.0
-        df = (tf > 0).sum(axis=0)
-        n_docs = len(self.docs)
-        self._idf = np.log1p((n_docs - df + 0.5) / (df + 0.5))
-        norm = k1 * (1.0 - b + b * lengths / avg) if avg else np.ones_like(lengths)
-        # Precomputed term weights: score(q, d) = sum over q's terms of this matrix's column.
-        self._weights = self._idf * tf * (k1 + 1.0) / (tf + norm[:, None])
+        self._bm25 = BM25Index([document_text(d, include_body) for d in self.docs], k1=k1, b=b)
 
     def scores(self, query: str) -> np.ndarray:
         """One BM25 score per document; each distinct query term counts once."""
-        cols = sorted({self._index[t] for t in tokenize(query) if t in self._index})
-        if not cols:
-            return np.zeros(len(self.docs))
-        out: np.ndarray = self._weights[:, cols].sum(axis=1)
-        return out
+        return self._bm25.scores(query)
 
     def rank(
         self, query: str, k: int | None = None, *, among: Sequence[str] | None = None
@@ -132,8 +149,7 @@ class BM25Retriever:
         return hits if k is None else hits[:k]
 
     def idf(self, term: str) -> float:
-        i = self._index.get(stem(term.lower()))
-        return float(self._idf[i]) if i is not None else math.nan
+        return self._bm25.idf(term)
 
 
 def rank(
@@ -143,4 +159,13 @@ def rank(
     return [(h.doc, h.score) for h in BM25Retriever(docs, include_body=include_body).rank(query, k)]
 
 
-__all__ = ["STOP_WORDS", "BM25Retriever", "Hit", "document_text", "rank", "stem", "tokenize"]
+__all__ = [
+    "STOP_WORDS",
+    "BM25Index",
+    "BM25Retriever",
+    "Hit",
+    "document_text",
+    "rank",
+    "stem",
+    "tokenize",
+]
