@@ -196,6 +196,9 @@ class KinematicWorld:
     def entities(self) -> Iterator[Entity]:
         return iter(self._entities.values())
 
+    def has_entity(self, entity_id: str) -> bool:
+        return entity_id in self._entities
+
     def entity(self, entity_id: str) -> Entity:
         try:
             return self._entities[entity_id]

@@ -230,9 +230,23 @@ class TaskDefinition(ABC):
     def sensing_radius(self, body: str) -> float:
         return self.spec.role(self.role_of(body)).sensing_radius_m
 
-    def visible(self, world: KinematicWorld, body: str) -> list[Entity]:
-        """Entities and bodies (kind ``"uav"``) ``body`` senses now, within its role's radius."""
+    def sensed(self, world: KinematicWorld, body: str) -> list[Entity]:
+        """Entities and bodies (kind ``"uav"``) within the role's sensing radius. Tasks that
+        hide things (forest occlusion) override this."""
         return world.sense(body, self.sensing_radius(body))
+
+    def visible(self, world: KinematicWorld, body: str) -> list[Entity]:
+        """What ``body`` perceives this round: what it senses, plus every static entity one
+        of its private facts names (its goal landmark, its own formation slot) wherever that
+        is: knowing *which* landmark is the goal includes knowing where it is, as mpe2's
+        agents observe their goal. Nothing else crosses the sensing radius."""
+        seen = self.sensed(world, body)
+        ids = {e.id for e in seen}
+        for value in self.private_facts(world, body).values():
+            if value not in ids and world.has_entity(value):
+                seen.append(world.entity(value))
+                ids.add(value)
+        return seen
 
     def facts(self, world: KinematicWorld, body: str) -> dict[str, str]:
         """This body's private facts (override). Only keys its role declares get through."""

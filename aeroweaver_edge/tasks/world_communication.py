@@ -57,7 +57,6 @@ CONTACT_M: Final = 3.0
 FORAGER_THREAT_M: Final = 18.0
 FORAGER_SPEED_MPS: Final = 15.0
 LEADER_SENSING_M: Final = 100.0
-THREAT_ROLES: Final = frozenset({"leader", "pursuer"})
 
 SPEC = TaskSpec(
     name="world_communication",
@@ -188,8 +187,8 @@ class WorldCommunication(TaskDefinition):
                 return wid
         return None
 
-    def visible(self, world: KinematicWorld, body: str) -> list[Entity]:
-        seen = super().visible(world, body)
+    def sensed(self, world: KinematicWorld, body: str) -> list[Entity]:
+        seen = super().sensed(world, body)
         if self.role_of(body) == "leader":
             return seen
         mine = self.forest_of(world, world.body(body))

@@ -1,0 +1,152 @@
+"""The sim backend (SimLink) over real zenoh sessions: a hand-driven world on one session,
+the UAV's link on another. Perception is the round trigger and carries the private facts;
+the command carries the velocity, the messages sent and the guess; rewards arrive before the
+next round; a shutdown ends the clock."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+
+import pytest
+
+from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.vehicle.sim import SimLink
+from aeroweaver_edge.wire import (
+    Entity,
+    HeaderFactory,
+    Keys,
+    MsgRef,
+    SimCommand,
+    SimEpisode,
+    SimPerception,
+    SimReward,
+)
+from tests.helpers.zenoh_net import ZenohNet, eventually
+
+KEYS = Keys("vs")
+L0 = Entity(id="L0", kind="landmark", pos=(1.0, 2.0, -5.0))
+
+
+@dataclass
+class World:
+    mesh: Mesh
+    headers: HeaderFactory
+    commands: list[SimCommand]
+
+    def perceive(self, rnd: int, uav: str = "uav0", **kw: object) -> None:
+        self.mesh.put(
+            KEYS.sim_perception(uav),
+            SimPerception(
+                h=self.headers.next(), uav=uav, episode=0, round=rnd, deadline_s=5.0,
+                pos=(float(rnd), 0.0, -5.0), vel=(0.0, 0.0, 0.0), **kw,  # type: ignore[arg-type]
+            ),
+            block=True,
+        )  # fmt: skip
+
+    def reward(self, rnd: int, value: float, done: bool = False) -> None:
+        self.mesh.put(
+            KEYS.sim_reward("uav0"),
+            SimReward(h=self.headers.next(), uav="uav0", episode=0, round=rnd, reward=value,
+                      done=done),
+            block=True,
+        )  # fmt: skip
+
+
+@pytest.fixture
+async def pair(zenoh_net: ZenohNet) -> AsyncIterator[tuple[World, SimLink]]:
+    world_mesh = await zenoh_net.open("world")
+    commands: list[SimCommand] = []
+    world_mesh.subscribe(
+        KEYS.sim_command("*"), SimCommand, on_item=lambda item: commands.append(item[1])
+    )
+    uav_mesh = await zenoh_net.open("uav0")
+    link = SimLink(uav_mesh, KEYS, "uav0", HeaderFactory("uav0"), reward_wait_s=2.0)
+    await link.start()
+    await asyncio.sleep(0.2)  # let both subscriptions propagate
+    try:
+        yield World(world_mesh, HeaderFactory("world"), commands), link
+    finally:
+        await link.aclose()
+
+
+async def test_perception_triggers_a_round_with_facts_and_expectations(
+    pair: tuple[World, SimLink],
+) -> None:
+    world, link = pair
+    ref = MsgRef(sender="uav1", seq=7, to="*")
+    world.perceive(0, "uav9")  # another UAV's perception never triggers this one
+    world.perceive(0, entities=[L0], expected_inbox=[ref], facts={"key": "2"})
+    tick = await asyncio.wait_for(link.next_round(), 3.0)
+    assert tick is not None
+    assert (tick.episode, tick.round, tick.deadline_s, tick.expect) == (0, 0, 5.0, (ref,))
+    percept = await link.sense(tick)
+    assert percept.own.pos == (0.0, 0.0, -5.0)
+    assert list(percept.entities) == [L0]
+    assert dict(percept.facts) == {"key": "2"}
+    assert (await link.state()).pos == (0.0, 0.0, -5.0)
+
+
+async def test_the_command_carries_velocity_messages_and_guess(
+    pair: tuple[World, SimLink],
+) -> None:
+    world, link = pair
+    world.perceive(0)
+    tick = await asyncio.wait_for(link.next_round(), 3.0)
+    assert tick is not None
+    sent = [MsgRef(sender="uav0", seq=3, to="*")]
+    await link.set_velocity(3.0, -4.0, 0.0)
+    await link.finish(tick, sent=sent, guess="2")
+    assert await eventually(lambda: len(world.commands) == 1)
+    [cmd] = world.commands
+    assert (cmd.uav, cmd.round, cmd.vel, cmd.held, cmd.sent, cmd.guess) == (
+        "uav0", 0, (3.0, -4.0, 0.0), False, sent, "2",
+    )  # fmt: skip
+    assert cmd.h.sender == "uav0"
+
+    world.reward(0, -1.5)
+    world.perceive(1)
+    tick = await asyncio.wait_for(link.next_round(), 3.0)  # a new round starts held
+    assert tick is not None
+    await link.finish(tick, sent=[])
+    assert await eventually(lambda: len(world.commands) == 2)
+    assert (world.commands[1].held, world.commands[1].vel, world.commands[1].guess) == (
+        True, (0.0, 0.0, 0.0), None,
+    )  # fmt: skip
+
+
+async def test_the_reward_of_a_round_arrives_before_the_next_round(
+    pair: tuple[World, SimLink],
+) -> None:
+    world, link = pair
+    world.perceive(0)
+    tick = await asyncio.wait_for(link.next_round(), 3.0)
+    assert tick is not None
+    await link.finish(tick, sent=[])
+    world.perceive(1)  # the next perception overtakes the reward...
+    nxt = asyncio.create_task(link.next_round())
+    await asyncio.sleep(0.1)
+    assert not nxt.done()  # ...but the round waits for round 0's reward
+    world.reward(0, 2.5, done=False)
+    tick = await asyncio.wait_for(nxt, 3.0)
+    assert tick is not None
+    [event] = link.drain()
+    assert (event.episode, event.round, event.reward, event.done, event.source) == (
+        0, 0, 2.5, False, "sim",
+    )  # fmt: skip
+    world.reward(0, 2.5)  # a duplicate is ignored
+    await asyncio.sleep(0.1)
+    assert link.drain() == []
+
+
+async def test_shutdown_ends_the_clock(pair: tuple[World, SimLink]) -> None:
+    world, link = pair
+    world.mesh.put(
+        KEYS.sim_episode,
+        SimEpisode(h=world.headers.next(), episode=-1, task="coverage", phase="shutdown"),
+        block=True,
+    )
+    assert await asyncio.wait_for(link.next_round(), 3.0) is None
+    with pytest.raises(RuntimeError, match="no perception"):
+        await link.state()
