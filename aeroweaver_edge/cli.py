@@ -151,6 +151,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import memory
 
         return memory.main(["--records", str(args.records)])
+    if args.what == "reference":
+        from aeroweaver_edge.bench import reference
+
+        argv = ["--seeds", *map(str, args.seeds)]
+        if args.tasks:
+            argv += ["--tasks", *args.tasks]
+        return reference.main(argv)
     if args.what == "scale":
         from aeroweaver_edge.bench import scale
 
@@ -251,7 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.set_defaults(func=cmd_probe)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=["memory", "scale"])
+    b.add_argument("what", choices=["memory", "scale", "reference"])
     b.add_argument("--records", type=int, default=10_000, help="memory: records per role")
     b.add_argument(
         "--sizes", type=_swarm_size, nargs="+", default=[3, 10, 25, 50], help="scale: swarm sizes"
@@ -259,6 +266,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--task", choices=TASK_NAMES, default="coverage", help="scale: task")
     b.add_argument("--rounds", type=int, default=defaults.MAX_ROUNDS, help="scale: rounds per run")
     b.add_argument("--seed", type=int, default=1, help="scale: layout seed")
+    b.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="reference: seeds")
+    b.add_argument("--tasks", nargs="+", choices=TASK_NAMES, help="reference: tasks (all)")
     b.add_argument(
         "--in-process", action="store_true", help="scale: daemons in one process (no RSS)"
     )

@@ -287,6 +287,7 @@ class UavDaemon:
                 prompt_tokens=sc.prompt_tokens if sc else 0,
                 completion_tokens=sc.completion_tokens if sc else 0,
                 latency_s=out.latency_s,
+                cpu_s=out.cpu_s,
                 messages_sent=len(out.sent),
                 messages_dropped=out.dropped,
                 decode_errors=self.mesh.codec.stats.total,

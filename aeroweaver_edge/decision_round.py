@@ -12,7 +12,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from aeroweaver_edge.actions import HOLD, Intent
@@ -64,6 +64,7 @@ class RoundOutcome:
     scores: LabelScores | None = None
     n_candidates: int = 0
     latency_s: float = 0.0
+    cpu_s: float = 0.0  # this thread's CPU time over the round (in-process: other UAVs' too)
     violations: tuple[str, ...] = ()
     chosen_by_agent: bool = False  # False when an error, not the selector, produced the hold
     guess: str | None = None  # what a guessing skill recorded this round (the world scores it)
@@ -125,6 +126,7 @@ async def _apply(rc: RoundContext, gated: GatedCommand) -> None:
 async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None) -> RoundOutcome:
     """Run one round inside the tick's deadline; a missed deadline holds this UAV only."""
     started = time.monotonic()
+    cpu = time.thread_time()
     budget = max(0.05, tick.deadline_s - DEADLINE_MARGIN_S)
     try:
         async with asyncio.timeout(budget):
@@ -138,7 +140,7 @@ async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None)
             reason="deadline",
             latency_s=time.monotonic() - started,
         )
-    return out
+    return replace(out, cpu_s=time.thread_time() - cpu)
 
 
 def _held(

@@ -39,6 +39,12 @@ class PeerLink:
     ``announce=False`` makes a listen-only link (no liveliness token, no state queryable):
     the simulated world uses it for the opponents it flies that hear messages (the
     eavesdropper), which must not appear in any roster.
+
+    ``track_neighbours=True`` also subscribes to every peer's beacon to keep ``neighbours``
+    current. Off by default: nothing in a round needs peers' beacons (range is judged by
+    receivers from the positions messages carry), and following every beacon costs each UAV
+    one delivery per peer per round, O(N^2) for the swarm. ``refresh_neighbours`` still
+    fetches them on demand from the peers' state queryables.
     """
 
     def __init__(
@@ -50,6 +56,7 @@ class PeerLink:
         comm_radius_m: float,
         *,
         announce: bool = True,
+        track_neighbours: bool = False,
     ) -> None:
         if headers.sender != uav:
             raise ValueError(f"header factory sends as {headers.sender!r}, not {uav!r}")
@@ -57,6 +64,7 @@ class PeerLink:
         self.comm_radius_m = comm_radius_m
         self.inbox = Inbox(uav, comm_radius_m)
         self.announce = announce
+        self.track_neighbours = track_neighbours
         self._mesh = mesh
         self._keys = keys
         self._headers = headers
@@ -106,13 +114,15 @@ class PeerLink:
             mesh.subscribe(keys.broadcast("*"), InboxMessage, on_item=self._on_broadcast),
             mesh.watch_liveliness(keys.alive_uav("*"), on_item=self._on_alive),
         ]
+        if self.track_neighbours:
+            self._handles.append(
+                mesh.subscribe(keys.state("*"), StateBeacon, on_item=self._on_beacon)
+            )
         if self.announce:
-            self._handles += [
-                mesh.declare_queryable(keys.state(self.uav), lambda: self._own),
-                mesh.subscribe(keys.state("*"), StateBeacon, on_item=self._on_beacon),
-            ]
+            self._handles.append(mesh.declare_queryable(keys.state(self.uav), lambda: self._own))
             self._token = mesh.declare_token(keys.alive_uav(self.uav))
-            await self.refresh_neighbours()
+            if self.track_neighbours:
+                await self.refresh_neighbours()
 
     async def refresh_neighbours(self, timeout_s: float = 0.5) -> int:
         """Ask every reachable peer's state queryable for its latest beacon, so a late joiner

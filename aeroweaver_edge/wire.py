@@ -88,6 +88,7 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     prompt_tokens: int = 0
     completion_tokens: int = 0
     latency_s: float = 0.0
+    cpu_s: float = 0.0  # the daemon thread's CPU time over the round
     messages_sent: int = 0
     messages_dropped: int = 0
     decode_errors: int = 0  # cumulative payloads this daemon rejected

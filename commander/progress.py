@@ -22,6 +22,7 @@ class UavProgress:
     llm_calls: int = 0
     # Per-round latency, bounded: a long field mission must not grow the Commander.
     latencies_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
+    cpu_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
 
 
 @dataclass
@@ -50,5 +51,6 @@ class ProgressBoard:
         p.messages_dropped += rep.messages_dropped
         p.llm_calls += rep.prompt_tokens > 0
         p.latencies_s.append(rep.latency_s)
+        p.cpu_s.append(rep.cpu_s)
         tokens = rep.prompt_tokens + rep.completion_tokens
         self.episode_tokens[rep.episode] = self.episode_tokens.get(rep.episode, 0) + tokens

@@ -36,9 +36,12 @@ Retrieval (the exact algorithm of DESIGN §5)
 Speed
     SQLite is the durable store; retrieval runs on an in-memory inverted index per
     (task, role), loaded lazily from the table on first use and kept in sync on every
-    write. Posting lists and per-record columns are ``array`` buffers, so a query is one
-    ``numpy.bincount`` over the postings of the query's tokens -- O(postings) with no
-    Python loop over records -- then an O(n) threshold selection for the top K.
+    write. Posting lists and per-record columns are ``array`` buffers. A query over a large
+    group is one ``numpy.bincount`` over the postings of the query's tokens -- O(postings)
+    with no Python loop over records -- then an O(n) threshold selection for the top K.
+    Groups of up to ``SMALL_GROUP`` records (every simulated episode of up to 50 UAVs) are
+    scored the same way in plain Python, so a daemon imports numpy (about 10 MB of resident
+    memory) only once its memory outgrows that; both paths select the same records.
 
 Not thread-safe: one owner thread (see ``AsyncExperienceMemory`` for the asyncio daemon).
 """
@@ -59,14 +62,14 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final, TypeVar
 
-import numpy as np
-import numpy.typing as npt
-
 from aeroweaver_edge.agent.state_tokens import TOKENIZER_VERSION, tokenise
 from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.wire import MAX_TEXT, ExperienceRecord, Header
 
 log = logging.getLogger(__name__)
+
+SMALL_GROUP: Final = 2048
+"""Largest (task, role) group scored in plain Python; larger ones use numpy."""
 
 SCHEMA_VERSION: Final = 1
 LOCAL: Final = ""  # ``origin`` of records appended by this memory's own daemon
@@ -697,12 +700,49 @@ class ExperienceMemory:
     def __len__(self) -> int:
         return int(self._db.execute("SELECT count(*) FROM records").fetchone()[0])
 
-    def _select(
-        self, group: _Group, tokens: frozenset[str]
-    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+    def _select(self, group: _Group, tokens: frozenset[str]) -> tuple[list[int], list[float]]:
         """Positions of the neighbourhood (best first) and their Jaccard similarities."""
+        if len(group) > SMALL_GROUP:
+            return self._select_numpy(group, tokens)
+        return self._select_python(group, tokens)
+
+    def _eligible(self, group: _Group, i: int) -> bool:
+        return not math.isnan(group.ret[i]) and (not self.finalised_only or group.final[i] != 0)
+
+    def _select_python(
+        self, group: _Group, tokens: frozenset[str]
+    ) -> tuple[list[int], list[float]]:
         n = len(group)
-        empty = (np.empty(0, np.int64), np.empty(0, np.float64))
+        everywhere = 0
+        inter: dict[int, int] = {}
+        for tok in tokens:
+            plist = group.postings.get(tok)
+            if plist is None:
+                continue
+            if len(plist) == n:
+                everywhere += 1  # in every record: counted once, not per record
+                continue
+            for i in plist:
+                inter[i] = inter.get(i, 0) + 1
+        if n == 0 or (not inter and not everywhere):
+            return [], []
+        overlap = range(n) if everywhere else sorted(inter)
+        q = len(tokens)
+        scored = [
+            (ci / (group.size[i] + q - ci), i)
+            for i in overlap
+            if self._eligible(group, i) and (ci := everywhere + inter.get(i, 0)) > 0
+        ]
+        # best first: similarity desc, then recency (position) desc; the first K of that
+        # order are the top K by similarity with ties broken toward the newest.
+        scored.sort(key=lambda x: (-x[0], -x[1]))
+        best = scored[: self.neighbourhood]
+        return [i for _, i in best], [sim for sim, _ in best]
+
+    def _select_numpy(self, group: _Group, tokens: frozenset[str]) -> tuple[list[int], list[float]]:
+        import numpy as np
+
+        n = len(group)
         # Tokens every record holds (task, role, fixed field names) add 1 to every overlap:
         # count them instead of concatenating n-long posting lists.
         everywhere = 0
@@ -716,7 +756,7 @@ class ExperienceMemory:
             else:
                 lists.append(np.frombuffer(plist, dtype=np.int32))
         if n == 0 or (not lists and not everywhere):
-            return empty
+            return [], []
         inter = np.full(n, everywhere, dtype=np.int64)
         if lists:
             inter += np.bincount(np.concatenate(lists), minlength=n)
@@ -726,7 +766,7 @@ class ExperienceMemory:
             eligible &= np.frombuffer(group.final, dtype=np.int8) != 0
         cand = np.flatnonzero(eligible)  # ascending position == ascending recency
         if cand.size == 0:
-            return empty
+            return [], []
         ci = inter[cand]
         sim = ci / (np.frombuffer(group.size, dtype=np.int32)[cand] + len(tokens) - ci)
         k = self.neighbourhood
@@ -740,7 +780,7 @@ class ExperienceMemory:
         # best first: similarity desc, then recency desc
         order = np.lexsort((-cand[keep], -sim[keep]))
         keep = keep[order]
-        return cand[keep].astype(np.int64), sim[keep].astype(np.float64)
+        return [int(i) for i in cand[keep]], [float(x) for x in sim[keep]]
 
     def neighbourhood_of(self, task: str, role: str, state_text: str) -> list[Neighbour]:
         """The retrieved neighbourhood, best first (what ``advantages`` averages over)."""
@@ -748,7 +788,7 @@ class ExperienceMemory:
         pos, sim = self._select(group, tokenise(state_text))
         return [
             Neighbour(group.keys[i], group.skills[group.skill[i]], group.ret[i], s, group.seq[i])
-            for i, s in zip(pos.tolist(), sim.tolist(), strict=True)
+            for i, s in zip(pos, sim, strict=True)
         ]
 
     def advantages(
@@ -762,20 +802,17 @@ class ExperienceMemory:
         if group is None:
             return dict.fromkeys(names, 0.0)
         pos, _ = self._select(group, tokenise(state_text))
-        if pos.size == 0:
+        if not pos:
             return dict.fromkeys(names, 0.0)
-        rets = np.frombuffer(group.ret, dtype=np.float64)[pos]
-        sids = np.frombuffer(group.skill, dtype=np.int32)[pos]
-        baseline = float(rets.mean())
-        sums = np.bincount(sids, weights=rets, minlength=len(group.skills))
-        counts = np.bincount(sids, minlength=len(group.skills))
+        rets = [group.ret[i] for i in pos]
+        baseline = math.fsum(rets) / len(rets)
+        by_skill: dict[int, list[float]] = {}
+        for i, r in zip(pos, rets, strict=True):
+            by_skill.setdefault(group.skill[i], []).append(r)
         out: dict[str, float] = {}
         for name in names:
-            sid = group.skill_ids.get(skill_of(name))
-            if sid is None or counts[sid] == 0:
-                out[name] = 0.0
-            else:
-                out[name] = float(sums[sid] / counts[sid]) - baseline
+            mine = by_skill.get(group.skill_ids.get(skill_of(name), -1))
+            out[name] = 0.0 if not mine else math.fsum(mine) / len(mine) - baseline
         return out
 
     def close(self) -> None:

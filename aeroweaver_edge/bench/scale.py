@@ -5,7 +5,9 @@
 process per daemon unless ``--in-process``, and prints for each size:
 
 * ``round_wall_s``: the world's wall time per round (perceptions out to rewards out), p50/p95;
-* ``decision_s``: each daemon's time per decision (observe to act), p50/p95;
+* ``decision_s``: each daemon's wall time per decision (observe to act), p50/p95, and
+  ``decision_cpu_s``: the daemon thread's CPU time per decision (meaningful with one
+  process per daemon: in-process it includes the other daemons' work);
 * ``messages_per_round``: (message, recipient) pairs delivered per round, and
   ``broadcasts_per_round``: messages sent per round;
 * ``peak_rss_mb``: peak resident memory (``VmHWM``) per daemon process, max and mean;
@@ -49,6 +51,7 @@ async def measure(task: str, n: int, *, processes: bool, rounds: int, seed: int)
         "end": s["episodes"][0]["reason"],
         "round_wall_s": {k: v for k, v in s["round_wall_s"].items() if k in ("p50", "p95")},
         "decision_s": {k: v for k, v in s["decision_latency_s"].items() if k in ("p50", "p95")},
+        "decision_cpu_s": {k: v for k, v in s["decision_cpu_s"].items() if k in ("p50", "p95")},
         "messages_per_round": round(s["deliveries"] / played, 1),
         "broadcasts_per_round": round(s["messages_sent"] / played, 1),
         "peak_rss_mb": (

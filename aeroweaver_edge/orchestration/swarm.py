@@ -87,6 +87,7 @@ class RunSummary:
     tokens_by_agent: dict[str, int] = field(default_factory=dict)
     tokens_by_role: dict[str, int] = field(default_factory=dict)
     decision_latency_s: dict[str, float] = field(default_factory=dict)
+    decision_cpu_s: dict[str, float] = field(default_factory=dict)
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
 
@@ -122,6 +123,7 @@ class RunSummary:
             "tokens_by_agent": self.tokens_by_agent,
             "tokens_by_role": self.tokens_by_role,
             "decision_latency_s": self.decision_latency_s,
+            "decision_cpu_s": self.decision_cpu_s,
             "round_wall_s": percentiles(self.round_wall_s),
             "peak_rss_kb": self.peak_rss_kb,
             "setup_tokens": self.setup_tokens,
@@ -154,8 +156,22 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def mesh_configs(namespace: str) -> tuple[MeshConfig, MeshConfig]:
+def mesh_configs(namespace: str, *, star: bool = True) -> tuple[MeshConfig, MeshConfig]:
+    """(the world's, everyone else's) mesh settings on loopback.
+
+    ``star``: the world's session is a Zenoh router and every daemon and the Commander a
+    client of it, so each holds one link instead of one per peer (a full peer mesh is
+    O(N^2) links, about 3 MB and a thread's worth of work per daemon at 50 UAVs); routing
+    happens inside Zenoh, never in the world's Python. ``star=False``: a gossiping peer
+    mesh around the world, as the field deployment uses.
+    """
     port = free_port()
+    if star:
+        seed = MeshConfig(mode="router", listen=[f"tcp/127.0.0.1:{port}"], namespace=namespace)
+        client = MeshConfig(
+            mode="client", listen=[], connect=[f"tcp/127.0.0.1:{port}"], namespace=namespace
+        )
+        return seed, client
     seed = MeshConfig(listen=[f"tcp/127.0.0.1:{port}"], namespace=namespace)
     peer = MeshConfig(
         listen=["tcp/127.0.0.1:0"], connect=[f"tcp/127.0.0.1:{port}"], namespace=namespace
@@ -340,6 +356,7 @@ async def run_swarm(
         summary.decision_latency_s = percentiles(
             [x for p in board.uavs.values() for x in p.latencies_s]
         )
+        summary.decision_cpu_s = percentiles([x for p in board.uavs.values() for x in p.cpu_s])
     summary.wall_s = time.monotonic() - started
     return summary
 

@@ -24,7 +24,7 @@ STILL: Vec3 = (0.0, 0.0, 0.0)
 
 async def join(net: ZenohNet, uav: str, radius_m: float = 55.0) -> tuple[PeerLink, Mesh]:
     mesh = await net.open(uav)
-    link = PeerLink(mesh, KEYS, uav, HeaderFactory(uav), radius_m)
+    link = PeerLink(mesh, KEYS, uav, HeaderFactory(uav), radius_m, track_neighbours=True)
     await link.start()
     return link, mesh
 
@@ -234,3 +234,20 @@ async def test_state_queryable_serves_own_beacon(zenoh_net: ZenohNet) -> None:
     own = links["a"].own_beacon
     replies = await zenoh_net.meshes[1].get(KEYS.state("a"), StateBeacon, timeout_s=2.0)
     assert replies == [(KEYS.state("a"), own)]
+
+
+async def test_beacons_are_not_followed_unless_asked(zenoh_net: ZenohNet) -> None:
+    """By default a link publishes its beacon and serves it, but does not subscribe to every
+    peer's (O(N^2) per round); the table can still be filled on demand."""
+    mesh = await zenoh_net.open("quiet")
+    quiet = PeerLink(mesh, KEYS, "quiet", HeaderFactory("quiet"), 55.0)
+    await quiet.start()
+    loud, _ = await join(zenoh_net, "loud")
+    assert await loud.wait_for_peers({"quiet"}, 3.0)
+    assert await quiet.wait_for_peers({"loud"}, 3.0)
+    loud.publish_beacon(1, (1.0, 1.0, -5.0), STILL)
+    quiet.publish_beacon(1, (2.0, 2.0, -5.0), STILL)
+    assert await eventually(lambda: "quiet" in loud.neighbours)
+    assert dict(quiet.neighbours) == {}
+    assert await quiet.refresh_neighbours(timeout_s=2.0) == 1
+    assert quiet.neighbours["loud"].pos == (1.0, 1.0, -5.0)
