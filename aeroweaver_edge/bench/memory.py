@@ -24,13 +24,14 @@ from pathlib import Path
 from typing import Any
 
 from aeroweaver_edge.agent.memory import ExperienceMemory
+from aeroweaver_edge.defaults import MAX_ROUNDS, SENSING_RADIUS_M
 
 TASK = "coverage"
 ROLE = "searcher"
 UAVS = ("uav1", "uav2", "uav3")
-ROUNDS = 24
+ROUNDS = MAX_ROUNDS
 LANDMARKS = {"L1": (-28.0, 24.0), "L2": (4.0, 34.0), "L3": (32.0, 20.0)}
-SENSING_M = 45.0
+SENSING_M = SENSING_RADIUS_M
 
 
 def _state(rng: random.Random, uav: str, rnd: int) -> tuple[str, list[str]]:

@@ -25,7 +25,7 @@ import math
 import sys
 from typing import Any
 
-from aeroweaver_edge.defaults import MAX_ROUNDS
+from aeroweaver_edge.defaults import DEADLINE_S, MAX_ROUNDS
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 
 
@@ -38,7 +38,7 @@ async def measure(task: str, n: int, *, processes: bool, rounds: int, seed: int)
         processes=processes,
         selector="scripted",
         measure_rss=processes,
-        deadline_s=30.0,
+        deadline_s=DEADLINE_S,
     )
     s = (await run_swarm(opts)).as_dict()
     played = max(1, s["rounds"])

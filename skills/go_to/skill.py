@@ -9,11 +9,12 @@ from __future__ import annotations
 from pydantic import Field
 
 from aeroweaver_edge.actions import Intent, MoveTo
+from aeroweaver_edge.defaults import ARENA_HALF_M
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "go_to"
 POINT_KINDS = ("waypoint", "landmark")
-BOUND_M = 70.0
+BOUND_M = ARENA_HALF_M
 
 
 class Params(SkillParams):

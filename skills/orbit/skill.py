@@ -13,11 +13,12 @@ import math
 from pydantic import Field
 
 from aeroweaver_edge.actions import Intent, MoveTo
+from aeroweaver_edge.defaults import ARENA_HALF_M
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "orbit"
 POINT_KINDS = ("waypoint", "landmark")
-BOUND_M = 70.0
+BOUND_M = ARENA_HALF_M
 RADIUS_M = 10.0
 MIN_RADIUS_M, MAX_RADIUS_M = 2.0, 50.0
 STEP_M = 6.0
