@@ -137,6 +137,10 @@ class TaskDefinition(ABC):
         for body, role in self._roles.items():
             self._index[body] = seen.get(role, 0)
             seen[role] = self._index[body] + 1
+        self.setup()
+
+    def setup(self) -> None:  # noqa: B027 - optional hook
+        """Per-instance state of a task once its bodies and roles are known (override)."""
 
     # -- identity ----------------------------------------------------------------------
 

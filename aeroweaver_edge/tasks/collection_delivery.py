@@ -29,7 +29,6 @@ otherwise it holds.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from aeroweaver_edge.kinematics import KinematicWorld
@@ -140,14 +139,7 @@ class CollectionDelivery(TaskDefinition):
     spec: ClassVar[TaskSpec] = SPEC
     reference: ClassVar[CollectionPolicy] = CollectionPolicy()
 
-    def __init__(
-        self,
-        roles: Mapping[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         self.colours = COLOURS[: len(self.deposits)]
         n_treasures = max(len(TREASURES), len(self.collectors))
         self.treasure_ids = [f"T{k}" for k in range(n_treasures)]

@@ -156,14 +156,7 @@ class Coverage(TaskDefinition):
     spec: ClassVar[TaskSpec] = SPEC
     reference: ClassVar[CoveragePolicy] = CoveragePolicy()
 
-    def __init__(
-        self,
-        roles: dict[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         self.landmark_ids = [landmark_id(k) for k in range(self.n_uavs)]
         self._rewards: SpreadRewards | None = None  # built on first use
 

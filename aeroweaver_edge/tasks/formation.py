@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from aeroweaver_edge.kinematics import KinematicWorld
@@ -60,14 +59,7 @@ class Formation(TaskDefinition):
 
     reference = FormationPolicy()
 
-    def __init__(
-        self,
-        roles: Mapping[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         self.slots: list[NE] = []
         self.markers: list[NE] = []
         self._model: MpeRewardModel | None = None

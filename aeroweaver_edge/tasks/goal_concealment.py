@@ -124,14 +124,7 @@ class GoalConcealment(TaskDefinition):
     spec: ClassVar[TaskSpec] = SPEC
     reference: ClassVar[ConcealmentPolicy] = ConcealmentPolicy()
 
-    def __init__(
-        self,
-        roles: Mapping[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         n_landmarks = max(len(LANDMARKS_NE), self.n_uavs)
         self.landmark_ids = [landmark_id(k) for k in range(n_landmarks)]
         self.goal = self.landmark_ids[0]

@@ -20,7 +20,6 @@ signal (10 - d/100) and otherwise holds (it has nothing to go on).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar, Final
 
 from aeroweaver_edge.kinematics import KinematicWorld
@@ -111,14 +110,7 @@ class GuidedNavigation(TaskDefinition):
     spec: ClassVar[TaskSpec] = SPEC
     reference: ClassVar[GuidedNavigationPolicy] = GuidedNavigationPolicy()
 
-    def __init__(
-        self,
-        roles: Mapping[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         self.landmark_ids = [landmark_id(k) for k in range(len(LANDMARKS_NE))]
         self.goal = self.landmark_ids[0]
         self._model: MpeRewardModel | None = None

@@ -132,14 +132,7 @@ class PrivateCommunication(TaskDefinition):
     spec: ClassVar[TaskSpec] = SPEC
     reference: ClassVar[PrivateCommunicationPolicy] = PrivateCommunicationPolicy()
 
-    def __init__(
-        self,
-        roles: Mapping[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         self.symbol = 0
         self.key = 0
         self.guesses: dict[str, int] = {}

@@ -142,14 +142,7 @@ class PursuitEvasion(TaskDefinition):
     spec: ClassVar[TaskSpec] = SPEC
     reference: ClassVar[PursuitPolicy] = PursuitPolicy()
 
-    def __init__(
-        self,
-        roles: Mapping[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         self._model: MpeRewardModel | None = None
         self._bearing: dict[str, NE] = {}
 

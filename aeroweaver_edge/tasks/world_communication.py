@@ -139,14 +139,7 @@ class WorldCommunication(TaskDefinition):
     spec: ClassVar[TaskSpec] = SPEC
     reference: ClassVar[WorldCommunicationPolicy] = WorldCommunicationPolicy()
 
-    def __init__(
-        self,
-        roles: Mapping[str, str] | int | None = None,
-        *,
-        max_rounds: int | None = None,
-        altitude_m: float = 5.0,
-    ) -> None:
-        super().__init__(roles, max_rounds=max_rounds, altitude_m=altitude_m)
+    def setup(self) -> None:
         self.food_ids = [f"F{k}" for k in range(len(FOOD_NE))]
         self.forest_ids = [f"W{k}" for k in range(len(FOOD_NE))]
         self.food_visits = 0
