@@ -8,6 +8,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.sim.runner import RoundLog
 from commander.progress import ProgressBoard
 
@@ -21,10 +22,12 @@ class LiveView:
     async def on_round(self, log: RoundLog, board: ProgressBoard) -> None:
         res = log.result
         parts = []
-        for uav in sorted(res.rewards):
+        for uav in sorted(res.rewards, key=natural):
             rep = board.uavs.get(uav)
             last = rep.last if rep else None
             what = "absent" if uav in log.absent else ("missed" if uav in log.missed else "")
+            if uav not in log.commands and not what and rep is None:
+                what = "(world)"  # an opponent the world flies
             if (
                 not what
                 and last is not None
@@ -70,7 +73,7 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
     t.add_column("rounds")
     t.add_column("end")
     t.add_column("team return")
-    for uav in sorted(summary["agent_returns"]):
+    for uav in summary["agent_returns"]:
         t.add_column(uav)
     for ep in summary["episodes"]:
         t.add_row(
@@ -78,7 +81,7 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
             str(ep["rounds"]),
             ep["reason"],
             f"{ep['team_return']:.3f}",
-            *(f"{ep['agent_returns'][u]:.3f}" for u in sorted(summary["agent_returns"])),
+            *(f"{ep['agent_returns'][u]:.3f}" for u in summary["agent_returns"]),
         )
     console.print(t)
     tok = summary.get("tokens") or {}
@@ -88,6 +91,9 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
         f"dropped {s['messages_dropped']}; decode errors {s['decode_errors']}; "
         f"holds {s['holds']}; deadline misses {s['deadline_misses']}; wall {s['wall_s']:.2f} s"
     )
+    if s.get("scripted_returns"):
+        theirs = ", ".join(f"{b} {r:.3f}" for b, r in s["scripted_returns"].items())
+        console.print(f"flown by the world (not in the team mean): {theirs}")
     lat = s.get("decision_latency_s") or {}
     if lat:
         console.print(
