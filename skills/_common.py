@@ -25,6 +25,10 @@ from aeroweaver_edge.observation import Observation
 from aeroweaver_edge.skill_api import SkillContext
 from aeroweaver_edge.wire import Entity, InboxMessage
 
+MAX_TARGETS = 8
+"""Options a target skill offers at most: the nearest visible targets (``ctx.settings``
+``max_targets`` overrides). Keeps a crowded view (50 landmarks) inside the 26-label budget;
+with few targets every one is offered, in the order they were observed."""
 SYMBOLS = range(4)  # private-communication symbols 0..3 (one-hot over dim_c = 4 in mpe2)
 _SYMBOL_TEXT = frozenset(str(s) for s in SYMBOLS)
 Scalar = str | int | float | bool
@@ -55,6 +59,20 @@ def of_kind(obs: Observation, kind: str, roles: Collection[str] | None = None) -
     """Visible entities of ``kind`` (and, if given, with a ``role`` in ``roles``) whose id
     can be a parameter."""
     return [e for e in obs.of_kind(kind) if usable_id(e.id) and (roles is None or e.role in roles)]
+
+
+def nearest_first_k(obs: Observation, entities: list[Entity], ctx: SkillContext) -> list[Entity]:
+    """The ``max_targets`` entities nearest this UAV (ties: id), kept in observation order."""
+    k = int(ctx.settings.get("max_targets", MAX_TARGETS))
+    if len(entities) <= k:
+        return entities
+    pos = obs.own.pos
+
+    def dist(e: Entity) -> tuple[float, str]:
+        return (math.hypot(e.pos[0] - pos[0], e.pos[1] - pos[1]), e.id)
+
+    keep = {e.id for e in sorted(entities, key=dist)[:k]}
+    return [e for e in entities if e.id in keep]
 
 
 def move_and_announce(

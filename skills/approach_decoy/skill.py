@@ -7,7 +7,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Intent
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import allowed, move_and_announce, of_kind, visible
+from skills._common import allowed, move_and_announce, nearest_first_k, of_kind, visible
 
 NAME = "approach_decoy"
 ROLES = frozenset({"informed"})
@@ -21,7 +21,8 @@ def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     goal = obs.facts.get("goal_landmark", "")
     if not goal or not allowed(ctx, ROLES):
         return []
-    return [Params(target_id=e.id) for e in of_kind(obs, "landmark") if e.id != goal]
+    decoys = [e for e in of_kind(obs, "landmark") if e.id != goal]
+    return [Params(target_id=e.id) for e in nearest_first_k(obs, decoys, ctx)]
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:

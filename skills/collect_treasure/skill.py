@@ -11,7 +11,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Intent
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import allowed, move_and_announce, of_kind, visible
+from skills._common import allowed, move_and_announce, nearest_first_k, of_kind, visible
 
 NAME = "collect_treasure"
 ROLES = frozenset({"collector"})
@@ -28,7 +28,7 @@ def _empty(obs: Observation) -> bool:
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     if not allowed(ctx, ROLES) or not _empty(obs):
         return []
-    return [Params(target_id=e.id) for e in of_kind(obs, "treasure")]
+    return [Params(target_id=e.id) for e in nearest_first_k(obs, of_kind(obs, "treasure"), ctx)]
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:

@@ -6,6 +6,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Intent, MoveTo, Outgoing
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from skills._common import nearest_first_k
 
 NAME = "cover_landmark"
 
@@ -15,8 +16,8 @@ class Params(SkillParams):
 
 
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
-    """One option per landmark in sensing range: the only ones the UAV can aim for."""
-    return [Params(target_id=e.id) for e in obs.of_kind("landmark")]
+    """One option per landmark in sensing range (the nearest eight when more are in view)."""
+    return [Params(target_id=e.id) for e in nearest_first_k(obs, obs.of_kind("landmark"), ctx)]
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:

@@ -15,7 +15,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Intent
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import allowed, move_and_announce, of_kind, visible
+from skills._common import allowed, move_and_announce, nearest_first_k, of_kind, visible
 
 NAME = "evade_peer"
 ROLES = frozenset({"evader", "forager"})
@@ -31,7 +31,8 @@ class Params(SkillParams):
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     if not allowed(ctx, ROLES):
         return []
-    return [Params(target_id=e.id) for e in of_kind(obs, "uav", THREAT_ROLES)]
+    threats = of_kind(obs, "uav", THREAT_ROLES)
+    return [Params(target_id=e.id) for e in nearest_first_k(obs, threats, ctx)]
 
 
 def escape_point(

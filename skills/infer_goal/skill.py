@@ -6,7 +6,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Intent
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import allowed, move_and_announce, of_kind, visible
+from skills._common import allowed, move_and_announce, nearest_first_k, of_kind, visible
 
 NAME = "infer_goal"
 ROLES = frozenset({"adversary"})
@@ -19,7 +19,7 @@ class Params(SkillParams):
 def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     if not allowed(ctx, ROLES):
         return []
-    return [Params(target_id=e.id) for e in of_kind(obs, "landmark")]
+    return [Params(target_id=e.id) for e in nearest_first_k(obs, of_kind(obs, "landmark"), ctx)]
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:

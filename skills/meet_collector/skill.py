@@ -11,7 +11,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Intent
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import move_and_announce, of_kind, visible
+from skills._common import move_and_announce, nearest_first_k, of_kind, visible
 
 NAME = "meet_collector"
 PREFIX = "deposit_"
@@ -45,7 +45,8 @@ def options(obs: Observation, ctx: SkillContext) -> list[Params]:
     if colour is None:
         return []
     loaded = _loaded(obs, colour)
-    return [Params(target_id=e.id) for e in of_kind(obs, "uav", {"collector"}) if e.id in loaded]
+    carriers = [e for e in of_kind(obs, "uav", {"collector"}) if e.id in loaded]
+    return [Params(target_id=e.id) for e in nearest_first_k(obs, carriers, ctx)]
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:

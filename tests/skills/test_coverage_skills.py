@@ -57,6 +57,22 @@ def test_cover_landmark_offers_one_option_per_visible_landmark(reg: SkillRegistr
     assert skill.options(obs(PEER, FOOD), ctx()) == []
 
 
+def test_a_crowded_view_offers_the_nearest_eight_in_observation_order(
+    reg: SkillRegistry,
+) -> None:
+    """50 UAVs mean 50 landmarks: only the nearest eight become options (the label budget is
+    26 for everything), in the order they were observed; ``max_targets`` overrides."""
+    skill = reg.get("cover_landmark")
+    # Own position (-30, -30); landmark k is 5 k m away along north, listed far to near.
+    lms = [
+        Entity(id=f"L{k}", kind="landmark", pos=(-30.0 + 5.0 * k, -30.0, 0.0)) for k in range(12)
+    ]
+    opts = skill.options(obs(*reversed(lms)), ctx())
+    assert [p.model_dump()["target_id"] for p in opts] == [f"L{k}" for k in range(7, -1, -1)]
+    few = skill.options(obs(*lms), ctx(max_targets=3))
+    assert [p.model_dump()["target_id"] for p in few] == ["L0", "L1", "L2"]
+
+
 def test_cover_landmark_moves_over_the_landmark_at_own_altitude(reg: SkillRegistry) -> None:
     intent = run(reg.get("cover_landmark"), obs(L1, L2), ctx(altitude_m=7.5), target_id="L2")
     assert intent.motion == MoveTo((4.0, 34.0, -7.5))
