@@ -11,6 +11,10 @@ from aeroweaver_edge.skills import SkillRegistry, load_skills
 from aeroweaver_edge.wire import Entity
 
 CTX = SkillContext(uav="uav0", uav_index=0, role="searcher", task="coverage")
+# cover_landmark offers the nearest eight landmarks by default; the budget tests need more.
+WIDE = SkillContext(
+    uav="uav0", uav_index=0, role="searcher", task="coverage", settings={"max_targets": 100.0}
+)
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +89,7 @@ def test_skills_with_no_option_now_add_nothing(reg: SkillRegistry) -> None:
 
 def test_exactly_the_label_budget_is_allowed(reg: SkillRegistry) -> None:
     o = obs(*(landmark(i) for i in range(len(LABELS) - 1)))
-    cs = build_candidates(reg, ["cover_landmark", "hold_position"], o, CTX)
+    cs = build_candidates(reg, ["cover_landmark", "hold_position"], o, WIDE)
     assert len(cs.candidates) == len(LABELS) == 26
     assert cs.labels[-1] == "Z"
     assert cs.candidates[-1].text == "hold_position()"
@@ -94,7 +98,7 @@ def test_exactly_the_label_budget_is_allowed(reg: SkillRegistry) -> None:
 
 def test_overflow_beyond_26_labels_is_an_empty_set(reg: SkillRegistry) -> None:
     o = obs(*(landmark(i) for i in range(30)))
-    cs = build_candidates(reg, ["cover_landmark", "hold_position"], o, CTX)
+    cs = build_candidates(reg, ["cover_landmark", "hold_position"], o, WIDE)
     assert cs.candidates == ()
     assert cs.params == {}
     assert cs.overflow == 31 - 26
@@ -110,5 +114,5 @@ def test_overflow_beyond_a_smaller_model_budget(reg: SkillRegistry) -> None:
 
 def test_budget_never_exceeds_the_alphabet(reg: SkillRegistry) -> None:
     o = obs(*(landmark(i) for i in range(27)))
-    cs = build_candidates(reg, ["cover_landmark"], o, CTX, max_labels=100)
+    cs = build_candidates(reg, ["cover_landmark"], o, WIDE, max_labels=100)
     assert (cs.candidates, cs.overflow) == ((), 1)
