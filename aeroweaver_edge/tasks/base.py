@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from aeroweaver_edge.config import SimConfig
-from aeroweaver_edge.defaults import ALTITUDE_M, ARENA_HALF_M, COMM_RADIUS_M
+from aeroweaver_edge.defaults import ALTITUDE_M, COMM_RADIUS_M
 from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.tasks.spec import TaskSpec
 from aeroweaver_edge.wire import Entity, InboxMessage, Vec3
@@ -309,12 +309,6 @@ class TaskDefinition(ABC):
         return {"near_collisions": float(world.near_collisions(NEAR_COLLISION_M))}
 
 
-def in_bounds(north: float, east: float, margin_m: float = 7.0) -> bool:
-    """Inside the arena with ``margin_m`` to spare (mpe2's boundary penalty starts at 63 m)."""
-    limit = ARENA_HALF_M - margin_m
-    return abs(north) <= limit and abs(east) <= limit
-
-
 __all__ = [
     "HOLD_ACTION",
     "NE",
@@ -323,6 +317,5 @@ __all__ = [
     "Metrics",
     "ReferencePolicy",
     "TaskDefinition",
-    "in_bounds",
     "uav_id",
 ]

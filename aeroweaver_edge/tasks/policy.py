@@ -52,12 +52,6 @@ def distance_to(obs: Observation, pos: Vec3) -> float:
     return horizontal_distance(obs.own.pos, pos)
 
 
-def nearest(obs: Observation, entities: Iterable[Entity]) -> Entity | None:
-    """The entity closest to this UAV (ties: lowest id)."""
-    best = min(entities, key=lambda e: (distance_to(obs, e.pos), e.id), default=None)
-    return best
-
-
 def known_positions(
     obs: Observation, roles: Iterable[str] | None = None, kinds: Iterable[str] = ("intent",)
 ) -> dict[str, Vec3]:
@@ -116,7 +110,6 @@ __all__ = [
     "distance_to",
     "greedy_assignment",
     "known_positions",
-    "nearest",
     "out_of_bounds",
     "score_all",
     "target",

@@ -190,13 +190,4 @@ class TaskSpec:
         )
 
 
-def same_team_within(radius_m: float = COMM_RADIUS_M) -> Callable[[str, str, float], bool]:
-    """The routing rule for a swarm with no task: everyone talks within the radius."""
-
-    def rule(sender_role: str, receiver_role: str, distance_m: float) -> bool:
-        return distance_m <= radius_m
-
-    return rule
-
-
-__all__ = ["BLUE", "RED", "Cue", "RoleSpec", "TaskSpec", "same_team_within"]
+__all__ = ["BLUE", "RED", "Cue", "RoleSpec", "TaskSpec"]
