@@ -14,6 +14,18 @@ from typing import Any, Literal, TypeVar
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 _ID_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_-")
+_RUN_CHARS = _ID_CHARS | set("ABCDEFGHIJKLMNOPQRSTUVWXYZ.:")
+
+MAX_UAVS = 10
+"""Largest simulated swarm (``aeroweaver sim --uavs``, ``SimConfig.uavs``): the one bound."""
+
+# Documented bounds of the safety envelope (docs/reliability.md). Anything outside is a
+# typo or a unit mistake, never a real envelope: a fence of +-1e9 m or a 1e6 m/s cap is no
+# fence and no cap, and a zero separation turns collision avoidance off.
+GEOFENCE_LIMIT_M = 10_000.0  # every geofence bound within +-10 km of home
+ALTITUDE_LIMIT_M = 1_500.0  # altitude band within 0 .. 1500 m
+MAX_SPEED_LIMIT_MPS = 60.0  # speed cap within (0, 60] m/s
+SEPARATION_RANGE_M = (0.5, 100.0)  # minimum separation within 0.5 .. 100 m
 
 
 def _check_id(value: str, what: str) -> str:
@@ -67,8 +79,21 @@ class AgentConfig(_Section):
     gamma: float = Field(default=0.95, ge=0, le=1)
     neighbourhood: int = Field(default=32, ge=1)
     memory_path: str | None = None  # None: in-memory SQLite (lost on exit)
+    # A configured memory that cannot be opened or written stops the daemon with a clear
+    # error; false: it runs on with memory in RAM / dropped writes (and says so in the log).
+    memory_required: bool = True
+    # Run identity stamped on every record (the simulator gives its daemons one per run);
+    # None: a new one at each daemon start, so runs never collide in a shared memory file.
+    run_id: str | None = Field(default=None, min_length=1, max_length=64)
     share_experience: bool = True
     max_labels: int = Field(default=26, ge=2, le=26)
+
+    @field_validator("run_id")
+    @classmethod
+    def _run_id(cls, value: str | None) -> str | None:
+        if value is not None and not set(value) <= _RUN_CHARS:
+            raise ValueError(f"run id {value!r} may hold only letters, digits and _ - . :")
+        return value
 
 
 class SafetyConfig(_Section):
@@ -80,14 +105,32 @@ class SafetyConfig(_Section):
     geofence_north_m: tuple[float, float] = (-70.0, 70.0)
     geofence_east_m: tuple[float, float] = (-70.0, 70.0)
     altitude_band_m: tuple[float, float] = (2.0, 60.0)
-    max_speed_mps: float = Field(default=11.0, gt=0)
-    min_separation_m: float = Field(default=2.0, ge=0)
+    max_speed_mps: float = Field(default=11.0, gt=0, le=MAX_SPEED_LIMIT_MPS)
+    min_separation_m: float = Field(
+        default=2.0, ge=SEPARATION_RANGE_M[0], le=SEPARATION_RANGE_M[1]
+    )
 
     @field_validator("geofence_north_m", "geofence_east_m", "altitude_band_m")
     @classmethod
     def _ordered(cls, value: tuple[float, float]) -> tuple[float, float]:
         if value[0] >= value[1]:
             raise ValueError(f"lower bound {value[0]} must be below upper bound {value[1]}")
+        return value
+
+    @field_validator("geofence_north_m", "geofence_east_m")
+    @classmethod
+    def _fence_bounded(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if max(abs(value[0]), abs(value[1])) > GEOFENCE_LIMIT_M:
+            raise ValueError(
+                f"{list(value)} reaches beyond +-{GEOFENCE_LIMIT_M:g} m of home (metres, not mm?)"
+            )
+        return value
+
+    @field_validator("altitude_band_m")
+    @classmethod
+    def _band_bounded(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if value[0] < 0 or value[1] > ALTITUDE_LIMIT_M:
+            raise ValueError(f"{list(value)} must lie within 0 .. {ALTITUDE_LIMIT_M:g} m")
         return value
 
 
@@ -132,7 +175,7 @@ class SimConfig(_Section):
     """A simulated episode: world settings shared by the world and the runner."""
 
     task: str = "coverage"
-    uavs: int = Field(default=3, ge=1, le=10)
+    uavs: int = Field(default=3, ge=1, le=MAX_UAVS)
     seed: int = 1
     max_rounds: int = Field(default=24, ge=1)
     round_s: float = Field(default=0.5, gt=0)
@@ -172,6 +215,11 @@ def load_config(path: str | Path, model: type[M]) -> M:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset "
+            f"{exc.start}); save the file as UTF-8"
+        ) from None
     try:
         data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:

@@ -123,6 +123,7 @@ class ExperienceRecord(msgspec.Struct, frozen=True, kw_only=True, tag="exp"):
     ret: float | None = None
     final: bool = False
     reward_source: str = ""
+    run: str = ""  # the publisher's run identity: part of the deduplication key
 
 
 class Entity(msgspec.Struct, frozen=True, kw_only=True):
