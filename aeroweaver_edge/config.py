@@ -106,9 +106,7 @@ class SafetyConfig(_Section):
     geofence_east_m: tuple[float, float] = (-70.0, 70.0)
     altitude_band_m: tuple[float, float] = (2.0, 60.0)
     max_speed_mps: float = Field(default=11.0, gt=0, le=MAX_SPEED_LIMIT_MPS)
-    min_separation_m: float = Field(
-        default=2.0, ge=SEPARATION_RANGE_M[0], le=SEPARATION_RANGE_M[1]
-    )
+    min_separation_m: float = Field(default=2.0, ge=SEPARATION_RANGE_M[0], le=SEPARATION_RANGE_M[1])
 
     @field_validator("geofence_north_m", "geofence_east_m", "altitude_band_m")
     @classmethod

@@ -16,6 +16,8 @@ from typing import Any, Final, Literal, TypeVar
 
 import msgspec
 
+from aeroweaver_edge.hold_reasons import HoldCause
+
 SCHEMA_VERSION: Final = 1
 MAX_PAYLOAD_BYTES: Final = 64 * 1024
 MAX_TEXT: Final = 4096
@@ -74,6 +76,7 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     label: str | None
     held: bool
     hold_reason: str | None = None
+    hold_cause: HoldCause | None = None  # the closed set of hold_reasons.HOLD_CAUSES
     reward: float | None = None
     prompt_tokens: int = 0
     completion_tokens: int = 0
@@ -82,6 +85,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     messages_dropped: int = 0
     decode_errors: int = 0  # cumulative payloads this daemon rejected
     corrected: bool = False  # the experience correction changed the pick
+    llm_calls: int = 0  # requests sent to the LLM endpoint this round (answered or not)
+    llm_class: str = ""  # the selector's current logprob class (probe kind), if any
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):

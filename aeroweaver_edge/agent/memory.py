@@ -251,7 +251,13 @@ class _Group:
         return len(self.seq)
 
     def add(
-        self, key: RunKey, seq: int, tokens: Iterable[str], skill: str, ret: float | None, final: bool
+        self,
+        key: RunKey,
+        seq: int,
+        tokens: Iterable[str],
+        skill: str,
+        ret: float | None,
+        final: bool,
     ) -> None:
         i = len(self.seq)
         n_tokens = 0
@@ -1053,7 +1059,9 @@ class AsyncExperienceMemory:
         return cls(executor, memory)
 
     @classmethod
-    async def from_config(cls, cfg: AgentConfig, *, run: str | None = None) -> AsyncExperienceMemory:
+    async def from_config(
+        cls, cfg: AgentConfig, *, run: str | None = None
+    ) -> AsyncExperienceMemory:
         return await cls.open(
             cfg.memory_path,
             gamma=cfg.gamma,

@@ -105,7 +105,9 @@ def stats(files: list[Path]) -> dict[str, Any]:
         try:
             infos.append(_info(path, conn))
         except sqlite3.DatabaseError as exc:
-            raise UserError(f"{path}: not a readable memory ({exc})", "run 'memory check'") from None
+            raise UserError(
+                f"{path}: not a readable memory ({exc})", "run 'aeroweaver memory check'"
+            ) from None
         finally:
             conn.close()
     by_task: dict[str, dict[str, int]] = {}

@@ -137,7 +137,7 @@ def lost_records(path: Path, acks: list[Acks]) -> list[str]:
             if (uav, ep, rnd) in a.appends and (rec is None or rec[1] != reward):
                 lost.append(f"reward not on its decision {a.run}/{uav}/{ep}/{rnd}")
         for uav, ep in a.finals:
-            for (u, e, rnd) in a.appends:
+            for u, e, rnd in a.appends:
                 rec = records.get((a.run, u, e, rnd))
                 if (u, e) == (uav, ep) and (rec is None or not rec[2]):
                     lost.append(f"finalisation {a.run}/{uav}/{ep}/{rnd}")
@@ -201,11 +201,12 @@ def run(
                 procs.append((_spawn(path, acks.run, "uav0,uav1", seed + life * writers + w), acks))
             for proc, _ in procs:
                 _wait_ready(proc)
-            for proc, acks in sorted(procs, key=lambda _: rng.random()):
+            for proc, _acks in sorted(procs, key=lambda _: rng.random()):
                 time.sleep(rng.uniform(0.0, max_life_s / writers))
                 os.kill(proc.pid, signal.SIGKILL)
             for proc, acks in procs:
-                assert proc.stdout is not None and proc.stderr is not None
+                assert proc.stdout is not None
+                assert proc.stderr is not None
                 # Read through the same buffered file as READY was read (communicate()
                 # would skip what readline() had already buffered), up to EOF: the writer
                 # is dead, so everything it acknowledged is in the pipe.
