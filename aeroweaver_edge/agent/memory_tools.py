@@ -58,6 +58,7 @@ class FileInfo:
     path: Path
     schema_version: int | None
     records: int = 0
+    shared: int = 0  # copies of peers' records (origin != "")
     rewards: int = 0
     final: int = 0
     rewarded: int = 0
@@ -85,8 +86,9 @@ def _info(path: Path, conn: sqlite3.Connection) -> FileInfo:
     if version is None:
         return info
     run = _run_column(conn)
-    info.records, info.final, info.rewarded = conn.execute(
-        "SELECT count(*), coalesce(sum(final), 0), count(reward) FROM records"
+    info.records, info.final, info.rewarded, info.shared = conn.execute(
+        "SELECT count(*), coalesce(sum(final), 0), count(reward), "
+        "coalesce(sum(origin != ''), 0) FROM records"
     ).fetchone()
     info.rewards = conn.execute("SELECT count(*) FROM rewards").fetchone()[0]
     info.runs = {r[0] for r in conn.execute(f"SELECT DISTINCT {run} FROM records")}
@@ -117,6 +119,7 @@ def stats(files: list[Path]) -> dict[str, Any]:
                 by_task.setdefault(task, {})[role] = by_task.get(task, {}).get(role, 0) + n
     return {
         "records": sum(i.records for i in infos),
+        "shared_records": sum(i.shared for i in infos),
         "rewards": sum(i.rewards for i in infos),
         "rewarded_records": sum(i.rewarded for i in infos),
         "final_records": sum(i.final for i in infos),

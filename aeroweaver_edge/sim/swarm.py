@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import math
 import socket
 import sys
@@ -20,12 +19,16 @@ import uuid
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
+from aeroweaver_edge.agent.memory import new_run_id
 from aeroweaver_edge.app import run_daemon
 from aeroweaver_edge.config import AgentConfig, LLMConfig, MeshConfig, SimConfig, UavConfig
+from aeroweaver_edge.errors import RunFailed
+from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.sim.episode import EpisodeResult
+from aeroweaver_edge.sim.run_health import health_fields
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.sim.tasks import make_task
 from aeroweaver_edge.skills import load_skills
@@ -33,6 +36,9 @@ from commander.commander import Commander
 from commander.harness import plan_from_text
 from commander.plan import MissionPlan, template_plan
 from commander.progress import ProgressBoard
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.llm.probe import ProbeResult
 
 HONESTY_NOTE = {
     "scripted": "Decisions come from a scripted heuristic scorer, not an LLM: these returns say "
@@ -75,11 +81,16 @@ class RunSummary:
     messages_dropped: int = 0
     decode_errors: int = 0
     holds: int = 0
-    deadline_misses: int = 0
+    holds_by_cause: dict[str, int] = field(default_factory=dict)
+    deadline_misses: int = 0  # daemon side + world side (deadline_misses_by_side)
+    deadline_misses_by_side: dict[str, int] = field(default_factory=dict)
     lost_uavs: dict[str, list[int]] = field(default_factory=dict)
     wall_s: float = 0.0
     model: str | None = None
     probe: str | None = None
+    probe_kind: str | None = None  # the start-up probe's class
+    llm_classes: dict[str, int] = field(default_factory=dict)  # UAVs per final class
+    run_id: str = ""  # stamped on every experience record of this run
     tokens: dict[str, int] = field(default_factory=dict)
     setup_tokens: int = 0
     llm_calls: int = 0
@@ -109,7 +120,9 @@ class RunSummary:
             "messages_dropped": self.messages_dropped,
             "decode_errors": self.decode_errors,
             "holds": self.holds,
+            "holds_by_cause": self.holds_by_cause,
             "deadline_misses": self.deadline_misses,
+            "deadline_misses_by_side": self.deadline_misses_by_side,
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
             "tokens_by_agent": self.tokens_by_agent,
@@ -118,13 +131,17 @@ class RunSummary:
             "setup_tokens": self.setup_tokens,
             "mission": self.mission,
             "llm_calls": self.llm_calls,
+            "llm_classes": self.llm_classes,
+            "run_id": self.run_id,
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
         }
 
 
-def _mean(xs: list[float]) -> float:
-    return math.fsum(xs) / len(xs) if xs else math.nan
+def _mean(xs: list[float]) -> float | None:
+    """Mean, or ``None`` (JSON null) when there is nothing to average: never NaN."""
+    finite = [x for x in xs if math.isfinite(x)]
+    return math.fsum(finite) / len(finite) if finite and len(finite) == len(xs) else None
 
 
 def _percentiles(xs: list[float]) -> dict[str, float]:
@@ -174,6 +191,7 @@ class _Daemons:
         self.workdir = workdir
         self.tasks: dict[str, asyncio.Task[Any]] = {}
         self.procs: dict[str, asyncio.subprocess.Process] = {}
+        self.killed: set[str] = set()  # by fault injection: lost on purpose, not failed
 
     async def start(self) -> None:
         registry = load_skills()
@@ -201,6 +219,7 @@ class _Daemons:
 
     async def kill(self, uav: str) -> None:
         """Fault injection: the daemon dies abruptly (process SIGKILL, or task cancelled)."""
+        self.killed.add(uav)
         if uav in self.procs:
             self.procs[uav].kill()
             await self.procs[uav].wait()
@@ -213,10 +232,10 @@ class _Daemons:
         """Daemons that ended before the run did, with the reason."""
         out: dict[str, str] = {}
         for uav, t in self.tasks.items():
-            if t.done() and not t.cancelled() and t.exception() is not None:
-                out[uav] = repr(t.exception())
+            if uav not in self.killed and t.done() and not t.cancelled() and t.exception():
+                out[uav] = f"{type(t.exception()).__name__}: {t.exception()}"
         for uav, p in self.procs.items():
-            if p.returncode not in (None, 0):
+            if uav not in self.killed and p.returncode not in (None, 0):
                 tail = (self.workdir / f"{uav}.log").read_text(errors="replace")[-2000:]
                 out[uav] = f"exit {p.returncode}: {tail}"
         return out
@@ -255,12 +274,12 @@ async def _shared_llm(opts: SwarmOptions) -> AsyncIterator[tuple[LLMConfig, str]
         )
 
 
-async def _probe(llm: LLMConfig) -> str:
+async def _probe(llm: LLMConfig) -> ProbeResult:
     from aeroweaver_edge.llm.client import ChatClient
     from aeroweaver_edge.llm.probe import probe_endpoint
 
     async with ChatClient.from_config(llm) as client:
-        return (await probe_endpoint(client)).summary()
+        return await probe_endpoint(client)
 
 
 async def run_swarm(
@@ -281,6 +300,7 @@ async def run_swarm(
         deadline_s=opts.deadline_s,
     )
     namespace = f"aw-{uuid.uuid4().hex[:10]}"
+    run_id = new_run_id()  # one per run: its records never collide with another run's
     seed_mesh_cfg, peer_mesh_cfg = _mesh_configs(namespace)
     uavs = task.uav_ids
     summary = RunSummary(
@@ -289,6 +309,7 @@ async def run_swarm(
         opts.uavs,
         "processes" if opts.processes else "in-process",
         opts.selector,
+        run_id=run_id,
     )
 
     async with contextlib.AsyncExitStack() as stack:
@@ -299,7 +320,8 @@ async def run_swarm(
         summary.note = HONESTY_NOTE[source]
         if opts.selector == "llm":
             summary.model = llm.model
-            summary.probe = await _probe(llm)
+            probe = await _probe(llm)
+            summary.probe, summary.probe_kind = probe.line(), probe.kind
             summary.selector = f"llm:{llm.model}"
         else:
             summary.selector = "scripted:nearest-uncovered"
@@ -337,6 +359,7 @@ async def run_swarm(
                     beta=opts.beta,
                     gamma=opts.gamma,
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
+                    run_id=run_id,
                     share_experience=opts.share_experience,
                 ),
             )
@@ -382,13 +405,26 @@ async def run_swarm(
             raise
         runner.shutdown()
         await daemons.stop()
+        failed = daemons.failed()
+        if failed:
+            raise RunFailed(
+                f"{len(failed)} daemon(s) stopped during the run: "
+                + "; ".join(f"{u}: {_last_line(why)}" for u, why in sorted(failed.items()))
+            )
         await asyncio.sleep(0.2)  # last reports
 
         board = commander.board
         summary.messages_sent = sum(p.messages_sent for p in board.uavs.values())
         summary.messages_dropped = sum(p.messages_dropped for p in board.uavs.values())
         summary.holds = sum(p.holds for p in board.uavs.values())
-        summary.deadline_misses = runner.stats.deadline_misses
+        health = health_fields(
+            board, runner.stats.deadline_misses, summary.probe, summary.probe_kind
+        )
+        summary.holds_by_cause = health["holds_by_cause"]
+        summary.deadline_misses_by_side = health["deadline_misses_by_side"]
+        summary.deadline_misses = summary.deadline_misses_by_side["total"]
+        summary.llm_classes = health["llm_classes"]
+        summary.probe = health["probe"]
         summary.decode_errors = (
             world_mesh.codec.stats.total
             + cmdr_mesh.codec.stats.total
@@ -398,7 +434,7 @@ async def run_swarm(
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
         summary.tokens = {"prompt": prompt, "completion": completion, "total": prompt + completion}
-        summary.llm_calls = sum(p.llm_calls for p in board.uavs.values())
+        summary.llm_calls = health["llm_calls"]
         for e in summary.episodes:
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
         summary.tokens_by_agent = {
@@ -416,5 +452,10 @@ async def run_swarm(
 
 
 def write_json(summary: RunSummary, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(summary.as_dict(), indent=2, default=str) + "\n", encoding="utf-8")
+    """Strict JSON (never NaN), written atomically: a reader never sees half a file."""
+    write_json_file(path, summary.as_dict())
+
+
+def _last_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else text
