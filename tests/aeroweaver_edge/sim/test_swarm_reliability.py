@@ -60,7 +60,9 @@ async def test_two_runs_at_once_on_one_memory_dir_both_finish_and_keep_everythin
     tmp_path: Path,
 ) -> None:
     """Issue 8: two concurrent runs crashed daemons with KeyError and still exited 0."""
-    a, b = await asyncio.gather(run_swarm(opts(tmp_path, seed=3)), run_swarm(opts(tmp_path, seed=4)))
+    a, b = await asyncio.gather(
+        run_swarm(opts(tmp_path, seed=3)), run_swarm(opts(tmp_path, seed=4))
+    )
     for s in (a, b):
         assert s.lost_uavs == {}
         assert s.holds_by_cause["no_assignment"] == 0
