@@ -119,9 +119,7 @@ class SafetyConfig(_Section):
     @classmethod
     def _fence_bounded(cls, value: tuple[float, float]) -> tuple[float, float]:
         if max(abs(value[0]), abs(value[1])) > GEOFENCE_LIMIT_M:
-            raise ValueError(
-                f"{list(value)} reaches beyond +-{GEOFENCE_LIMIT_M:g} m of home (metres, not mm?)"
-            )
+            raise ValueError(f"{list(value)} reaches beyond +-{GEOFENCE_LIMIT_M:g} m of home")
         return value
 
     @field_validator("altitude_band_m")
@@ -202,7 +200,9 @@ def parse_config(data: dict[str, Any], model: type[M], source: str = "<config>")
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        problems = "; ".join(f"{_loc(e['loc'])}: {e['msg']}" for e in exc.errors())
+        problems = "; ".join(
+            f"{_loc(e['loc'])}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors()
+        )
         raise ConfigError(f"{source}: {problems}") from None
 
 

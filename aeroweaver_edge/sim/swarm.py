@@ -372,7 +372,7 @@ async def run_swarm(
         wait_s = 60.0 if opts.processes else 30.0
         missing = await runner.wait_alive(uavs, wait_s)
         if missing:
-            raise RuntimeError(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
+            raise RunFailed(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
         roster = sorted(runner.alive)
         if plan_factory is not None:
             plan = await plan_factory(roster)
@@ -389,7 +389,7 @@ async def run_swarm(
         board_ref["board"] = commander.board
         missing = await commander.wait_ready(plan.participants, wait_s)
         if missing:
-            raise RuntimeError(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
+            raise RunFailed(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
 
         try:
             for ep in range(opts.episodes):

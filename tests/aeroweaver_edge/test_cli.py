@@ -92,7 +92,10 @@ def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]
     with pytest.raises(SystemExit) as info:
         main(argv)
     assert info.value.code == 2
-    assert "usage: aeroweaver" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err.startswith("aeroweaver: error: ")
+    assert err.count("\n") == 1  # one line, naming the command's --help
+    assert "--help'" in err
 
 
 def test_sim_defaults_match_the_paper_horizon() -> None:
