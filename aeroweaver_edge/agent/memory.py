@@ -529,10 +529,13 @@ class ExperienceMemory:
             raise
         self._db.execute("COMMIT")
 
-    def _guard(self, what: str, default: T, fn: Callable[[], T], *, write: bool = True) -> T:
+    def _guard(
+        self, what: str, default: T, fn: Callable[[], T], *, write: bool = True, own: bool = True
+    ) -> T:
         """Run a database operation; a programming error raises. An environmental failure
-        of a write raises ``MemoryUnavailable`` when the memory is required; otherwise
-        (and for reads, which are advisory) it is logged, counted and dropped."""
+        of a write of our own experience raises ``MemoryUnavailable`` when the memory is
+        required; otherwise (reads, which are advisory, and peers' records, ``own=False``)
+        it is logged, counted and dropped."""
         try:
             return fn()
         except (sqlite3.ProgrammingError, sqlite3.IntegrityError, sqlite3.InterfaceError):
@@ -540,7 +543,7 @@ class ExperienceMemory:
         except sqlite3.Error as exc:
             if write:
                 self.write_errors += 1
-            if write and self.required:
+            if write and own and self.required:
                 raise MemoryUnavailable(
                     f"experience memory {self.path}: {what} failed: {exc}", during="write"
                 ) from None
@@ -798,7 +801,7 @@ class ExperienceMemory:
                     return None  # a newer copy of the same content
                 return seq, task, role
 
-        done = self._guard("ingest", None, go)
+        done = self._guard("ingest", None, go, own=False)
         if done is None:
             return False
         group = self._groups.get((done[1], done[2]))

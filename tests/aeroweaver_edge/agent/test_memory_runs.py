@@ -234,6 +234,31 @@ def test_required_memory_raises_on_a_failed_write(tmp_path: Path) -> None:
         assert m.advantages(T, R, "landmark l1", ["a"]) == {"a": 0.0}
 
 
+def test_a_failed_peer_ingest_is_dropped_even_when_memory_is_required(tmp_path: Path) -> None:
+    """Losing a peer's copy loses none of our own records: it never stops the daemon."""
+    with ExperienceMemory(tmp_path / "m.sqlite3", required=True) as m:
+        pages = m._db.execute("PRAGMA page_count").fetchone()[0]
+        m._db.execute(f"PRAGMA max_page_count = {pages}")
+        results = [
+            m.ingest(
+                ExperienceRecord(
+                    h=Header(sender="uav9", epoch=1, seq=i + 1, stamp=0.0),
+                    task=T,
+                    role=R,
+                    uav="uav9",
+                    episode=0,
+                    round=i,
+                    state_text=f"x{i} " * 1000,
+                    skill="cover",
+                    invocation="cover()",
+                    run="peer",
+                )
+            )
+            for i in range(20)
+        ]  # no MemoryUnavailable raised
+        assert results.count(False) == m.write_errors > 0
+
+
 def test_run_ids_are_unique_and_validated() -> None:
     assert len({new_run_id() for _ in range(100)}) == 100
     assert AgentConfig(run_id="20260101T000000-abcd1234").run_id is not None

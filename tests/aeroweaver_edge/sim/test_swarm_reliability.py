@@ -5,15 +5,23 @@ LLM request are counted; the summary's probe tells what the daemons settled on."
 from __future__ import annotations
 
 import asyncio
+import io
 import json
+import sqlite3
 from pathlib import Path
 from typing import Any
 
+import pytest
+from rich.console import Console
+
+from aeroweaver_edge.agent.memory import ExperienceMemory
 from aeroweaver_edge.agent.memory_tools import check, export_rows, memory_files, stats
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.hold_reasons import HOLD_CAUSES
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
 from aeroweaver_edge.sim.swarm import RunSummary, SwarmOptions, run_swarm, write_json
+from aeroweaver_edge.sim.view import LiveView
 
 NOT_STORED = ("no_assignment", "no_candidates", "llm_failure", "invalid_answer", "deadline")
 
@@ -81,10 +89,14 @@ async def test_llm_failures_are_counted_by_cause_with_every_request(tmp_path: Pa
             base_url=fake.base_url, model="fake-model", deadline_s=2.0, retries=0,
             breaker_failures=100,
         )  # fmt: skip
+        console = Console(file=io.StringIO(), width=400)
         summary = await run_swarm(
-            SwarmOptions(uavs=3, max_rounds=rounds, selector="llm", beta=0.0, llm=llm)
+            SwarmOptions(uavs=3, max_rounds=rounds, selector="llm", beta=0.0, llm=llm),
+            on_round=LiveView(console).on_round,
         )
         calls = fake.chat_calls
+    view = console.file.getvalue()  # type: ignore[attr-defined]
+    assert view.count("HOLD[llm_failure] hold_position()") >= 3 * (rounds - 1)
     data = summary.as_dict()
     assert set(data["holds_by_cause"]) == set(HOLD_CAUSES)
     assert data["holds"] == data["holds_by_cause"]["llm_failure"] == 3 * rounds
@@ -126,3 +138,28 @@ async def test_summary_probe_tells_what_the_daemons_settled_on(tmp_path: Path) -
     write_json(summary, path)
     assert json.loads(path.read_text())["llm_classes"] == {"ok": 3}
     assert not list(path.parent.glob(".*.tmp"))
+
+
+async def test_a_daemon_whose_memory_cannot_be_written_stops_and_the_run_fails(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A write failure of required memory (disk full, I/O error) is not dropped silently:
+    that daemon holds and stops, the run names it and fails."""
+    original = ExperienceMemory.append
+
+    def failing_append(self: ExperienceMemory, *args: Any) -> bool:
+        uav, rnd = args[2], args[4]
+        if uav == "uav1" and rnd >= 2:
+
+            def disk_error() -> bool:
+                raise sqlite3.OperationalError("disk I/O error")
+
+            return self._guard("append", False, disk_error)
+        return original(self, *args)
+
+    monkeypatch.setattr(ExperienceMemory, "append", failing_append)
+    with pytest.raises(RunFailed, match=r"uav1: MemoryUnavailable: .*append failed: disk I/O"):
+        await run_swarm(opts(tmp_path, seed=5))
+    rows = own_rows(tmp_path)
+    assert sorted(r["round"] for r in rows if r["uav"] == "uav1") == [0, 1]  # nothing else lost
+    assert {r["uav"] for r in rows} == {"uav0", "uav1", "uav2"}
