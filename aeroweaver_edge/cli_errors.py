@@ -36,7 +36,10 @@ def describe(exc: BaseException) -> tuple[int, str] | None:
     if isinstance(exc, RunFailed):
         return 1, f"run failed: {exc}"
     if isinstance(exc, ConfigError):
-        return 2, f"config error: {exc}; correct that setting (documented in docs/reliability.md)"
+        fix = (
+            exc.fix or "correct that setting (keys: configs/uav.toml; bounds: docs/reliability.md)"
+        )
+        return 2, f"config error: {exc}; {fix}"
     if isinstance(exc, MissionParseError):
         return 2, f"cannot understand the mission: {exc}"
     if isinstance(exc, SkillError):

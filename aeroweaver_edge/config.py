@@ -183,7 +183,12 @@ class SimConfig(_Section):
 
 
 class ConfigError(ValueError):
-    """A config file could not be used; the message names the file and the key."""
+    """A config file could not be used; the message names the file and the key, ``fix``
+    (when there is a better one than "correct that setting") says what to do."""
+
+    def __init__(self, message: str, fix: str = "") -> None:
+        super().__init__(message)
+        self.fix = fix
 
 
 M = TypeVar("M", bound=BaseModel)
@@ -215,8 +220,8 @@ def load_config(path: str | Path, model: type[M]) -> M:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(
-            f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset "
-            f"{exc.start}); save the file as UTF-8"
+            f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})",
+            "save the file as UTF-8",
         ) from None
     try:
         data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
