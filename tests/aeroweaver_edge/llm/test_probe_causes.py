@@ -14,8 +14,32 @@ from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.llm.fake_provider import QUIRKS, FakeProvider, Policy
 from aeroweaver_edge.llm.probe import EXIT_STATUS, ProbeResult, probe_endpoint
+from aeroweaver_edge.observation import Observation, VehicleState
+from aeroweaver_edge.ports import Candidate, DecisionRequest
 from aeroweaver_edge.redact import redact_url
-from tests.aeroweaver_edge.agent.test_llm_selector import LABELS, request
+
+CANDIDATES = [
+    Candidate("A", "cover_landmark", {"target_id": "L1"}, "cover_landmark(target_id=L1)"),
+    Candidate("B", "explore_local", {"heading": "north"}, "explore_local(heading=north)"),
+    Candidate("C", "hold_position", {}, "hold_position()"),
+]
+LABELS = [c.label for c in CANDIDATES]
+
+
+def request() -> DecisionRequest:
+    obs = Observation(
+        uav="uav1", episode=0, round=1, own=VehicleState(pos=(0.0, 0.0, -5.0), vel=(0.0, 0.0, 0.0))
+    )
+    return DecisionRequest(
+        observation=obs,
+        mission_text="Cover every landmark.",
+        role="searcher",
+        local_goal="Take the nearest unclaimed landmark.",
+        constraints=(),
+        skill_docs=("### cover_landmark\nFly to a landmark.", "### hold_position\nStay."),
+        observation_text="round 1; landmark L1: 20 m N",
+        candidates=CANDIDATES,
+    )
 
 
 @pytest.fixture
