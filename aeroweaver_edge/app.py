@@ -51,7 +51,7 @@ async def open_selector(
             llm = llm.model_copy(update={"base_url": server.base_url, "model": server.model})
         client = await stack.enter_async_context(ChatClient.from_config(llm))
         probe = await probe_endpoint(client)
-        log.info("%s: LLM endpoint %s: %s", agent_name, llm.base_url, probe.summary())
+        log.info("%s: LLM endpoint %s: %s", agent_name, client.endpoint, probe.summary())
         selector = LLMSelector(client, llm, probe, agent=agent_name)
         try:
             yield selector, SelectorInfo(f"llm:{llm.model}", llm.model, probe.summary())

@@ -1,4 +1,9 @@
-"""``aeroweaver``: run a daemon, a simulated swarm, a probe or a benchmark."""
+"""``aeroweaver``: run a daemon, a simulated swarm, a probe or a benchmark.
+
+Every user error is one line on stderr naming the cause and the fix, exit status 2
+(``cli_errors``); tracebacks only with ``-v``. Outputs, memory directories, the API-key
+variable, the task and the skill tree are checked before any work starts (``cli_checks``).
+"""
 
 from __future__ import annotations
 
@@ -8,22 +13,43 @@ import logging
 import os
 import signal
 import sys
-from collections.abc import Coroutine, Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
 from aeroweaver_edge import defaults
-from aeroweaver_edge.config import ConfigError, LLMConfig, UavConfig, load_config
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.cli_checks import (
+    check_api_key_env,
+    check_llm_url,
+    check_memory_dir,
+    check_memory_path,
+    check_output_file,
+    check_skills,
+    check_task,
+    finite,
+    int_in,
+)
+from aeroweaver_edge.cli_errors import ArgumentParser, report
+from aeroweaver_edge.config import MAX_UAVS, LLMConfig, UavConfig, load_config, parse_config
 from aeroweaver_edge.tasks import TASK_NAMES
 
 T = TypeVar("T")
 
 
+class Stopped(Exception):
+    """The operator stopped the command with a signal."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
 def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
     url = args.llm or os.environ.get("AEROWEAVER_LLM_URL")
     model = args.model or os.environ.get("AEROWEAVER_LLM_MODEL")
+    check_llm_url(url, "--llm" if args.llm else "AEROWEAVER_LLM_URL")
+    check_api_key_env(args.api_key_env)
     fields: dict[str, Any] = {"base_url": url}
     if model:
         fields["model"] = model
@@ -31,30 +57,55 @@ def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
         fields["api_key_env"] = args.api_key_env
     if args.llm_deadline is not None:
         fields["deadline_s"] = args.llm_deadline
-    return LLMConfig(**fields)
+    return parse_config(fields, LLMConfig, "LLM flags")
 
 
-def _run(coro: Coroutine[Any, Any, T]) -> T:
-    """Run a coroutine; SIGTERM cancels it like Ctrl-C so every session is closed."""
+def _run(coro: Coroutine[Any, Any, T], on_signal: Callable[[int], None] | None = None) -> T:
+    """Run a coroutine; SIGTERM and SIGINT cancel it so every session is closed, then
+    raise ``Stopped`` naming the signal."""
+    received: list[int] = []
 
     async def main() -> T:
         task = asyncio.current_task()
         loop = asyncio.get_running_loop()
-        if task is not None:
-            for sig in (signal.SIGTERM, signal.SIGINT):
-                loop.add_signal_handler(sig, task.cancel)
+
+        def stop(signum: int) -> None:
+            if not received and on_signal is not None:
+                on_signal(signum)
+            received.append(signum)
+            if task is not None:
+                task.cancel()
+
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, stop, sig)
         return await coro
 
-    return asyncio.run(main())
+    try:
+        return asyncio.run(main())
+    except asyncio.CancelledError:
+        if received:
+            raise Stopped(received[0]) from None
+        raise
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
     from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm, write_json
     from aeroweaver_edge.orchestration.view import LiveView, print_summary
 
+    task, uavs = args.task, args.uavs
+    # Everything a user can get wrong is checked here, before any process or session starts
+    # (a mission's own task and size are checked when it is parsed, also before any start).
+    if task is not None or not args.mission:
+        check_task(task or "coverage", uavs)
+    if args.json:
+        check_output_file(Path(args.json), "--json")
+    if args.memory_dir:
+        check_memory_dir(Path(args.memory_dir))
+    check_skills()
+    llm = _llm_from_args(args) if args.selector == "llm" else LLMConfig()
     opts = SwarmOptions(
-        task=args.task,
-        uavs=args.uavs,
+        task=task,
+        uavs=uavs,
         mission_text=args.mission,
         top_k=args.top_k,
         seed=args.seed,
@@ -62,7 +113,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         max_rounds=args.rounds,
         processes=args.processes,
         selector=args.selector,
-        llm=_llm_from_args(args),
+        llm=llm,
         beta=args.beta,
         memory_dir=Path(args.memory_dir) if args.memory_dir else None,
         deadline_s=args.deadline,
@@ -70,7 +121,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     view = None if args.quiet else LiveView()
     try:
         summary = _run(run_swarm(opts, on_round=view.on_round if view else None))
-    except (KeyboardInterrupt, asyncio.CancelledError):
+    except (KeyboardInterrupt, Stopped):
         print("aeroweaver: stopped by the operator; every UAV was told to hold", file=sys.stderr)
         return 130
     data = summary.as_dict()
@@ -83,9 +134,37 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def cmd_daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.app import run_daemon
+    from aeroweaver_edge.mesh import build_zenoh_config
+    from aeroweaver_edge.systemd_notify import Supervision
 
     cfg = load_config(args.config, UavConfig)
-    stats = _run(run_daemon(cfg))
+    build_zenoh_config(cfg.mesh)  # a bad endpoint or namespace: a config error, now
+    if cfg.agent.memory_required:
+        check_memory_path(cfg.agent.memory_path)
+    if cfg.agent.selector == "llm":
+        check_api_key_env(cfg.llm.api_key_env)
+        check_llm_url(cfg.llm.base_url, "llm.base_url")
+    check_skills()
+    supervision = Supervision.from_env()
+
+    async def supervised() -> Any:
+        def ready(daemon: object) -> None:
+            supervision.ready(f"{cfg.uav} up: mesh open, vehicle link started")
+
+        try:
+            return await run_daemon(cfg, on_ready=ready)
+        finally:
+            await supervision.aclose()
+
+    def stopping(signum: int) -> None:
+        supervision.stopping(f"{cfg.uav} stopping on {signal.Signals(signum).name}: holding")
+
+    try:
+        stats = _run(supervised(), on_signal=stopping)
+    except Stopped as stop:
+        # systemctl stop sends SIGTERM: a clean, expected end (exit 0, the unit is not
+        # marked failed). Ctrl-C keeps the shell's convention.
+        return 0 if stop.signum == signal.SIGTERM else 130
     logging.getLogger("aeroweaver").info(
         "%s: %d rounds, %d holds, %d messages sent",
         cfg.uav,
@@ -97,16 +176,20 @@ def cmd_daemon(args: argparse.Namespace) -> int:
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
-    import json
-
     from aeroweaver_edge.config import MeshConfig
+    from aeroweaver_edge.mesh import build_zenoh_config
     from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
     from aeroweaver_edge.orchestration.view import LiveView, print_mission
 
-    mesh = MeshConfig(
-        listen=args.listen or ["tcp/127.0.0.1:0"], connect=args.connect or [],
-        namespace=args.namespace,
+    mesh = parse_config(
+        {"listen": args.listen or ["tcp/127.0.0.1:0"], "connect": args.connect or [],
+         "namespace": args.namespace},
+        MeshConfig,
+        "mesh flags",
     )  # fmt: skip
+    build_zenoh_config(mesh)  # a bad endpoint or namespace is an error now, not mid-run
+    if args.json:
+        check_output_file(Path(args.json), "--json")
     llm = None if args.no_llm else _llm_from_args(args)
     opts = MissionStartOptions(
         text=args.text, swarm=args.swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
@@ -124,26 +207,80 @@ def cmd_mission(args: argparse.Namespace) -> int:
                 return await start_mission(replace(opts, llm=local), LiveView().on_round)
         return await start_mission(opts, LiveView().on_round)
 
-    out = _run(go())
+    try:
+        out = _run(go())
+    except Stopped:
+        print("aeroweaver: stopped by the operator", file=sys.stderr)
+        return 130
     from rich.console import Console
+
+    from aeroweaver_edge.json_out import write_json_file
 
     print_mission(out["mission"], Console())
     print(f"mission ended: {out['ended']}; wall {out['wall_s']:.1f} s")
     if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=2, default=str) + "\n", encoding="utf-8")
+        write_json_file(Path(args.json), out)
         print(f"mission record written to {args.json}")
     return 0
 
 
 def cmd_probe(args: argparse.Namespace) -> int:
+    """Exit status follows the verdict (``llm.probe.EXIT_STATUS``)."""
+    from aeroweaver_edge.llm.probe import ProbeResult
     from aeroweaver_edge.orchestration.llm import probe, shared_llm
 
-    async def go() -> str:
-        async with shared_llm(_llm_from_args(args), needed=True) as (llm, _source):
-            return f"{llm.base_url} {llm.model}: {await probe(llm)}"
+    llm_cfg = _llm_from_args(args)
 
-    print(_run(go()))
-    return 0
+    async def go() -> ProbeResult:
+        async with shared_llm(llm_cfg, needed=True) as (llm, _source):
+            return await probe(llm)
+
+    try:
+        result = _run(go())
+    except Stopped:
+        return 130
+    print(result.line())
+    return result.exit_status
+
+
+def cmd_memory(args: argparse.Namespace) -> int:
+    """``memory stats|export|check DIR``: read-only views of experience-memory files."""
+    from aeroweaver_edge.agent import memory_tools as tools
+
+    files = tools.memory_files(Path(args.dir))
+    if args.memory_command == "stats":
+        data = tools.stats(files)
+        if args.json:
+            from aeroweaver_edge.json_out import dumps
+
+            print(dumps(data))
+            return 0
+        print(
+            f"{data['records']} records ({data['shared_records']} shared by peers), "
+            f"{data['rewards']} rewards, {data['runs']} runs in {len(files)} file(s)"
+        )
+        for task, roles in data["by_task"].items():
+            print(f"  {task}: " + ", ".join(f"{role} {n}" for role, n in roles.items()))
+        return 0
+    if args.memory_command == "export":
+        if args.output:
+            out = Path(args.output)
+            check_output_file(out, "--output")
+            out.parent.mkdir(parents=True, exist_ok=True)
+            with out.open("w", encoding="utf-8") as f:
+                n = tools.export_jsonl(files, f)
+            print(f"{n} records written to {args.output}", file=sys.stderr)
+        else:
+            tools.export_jsonl(files, sys.stdout)
+        return 0
+    problems = tools.check(files)
+    bad = 0
+    for path, found in problems.items():
+        print(f"{path}: {'ok' if not found else f'{len(found)} problem(s)'}")
+        for problem in found[:20]:
+            print(f"  {problem}")
+        bad += bool(found)
+    return 1 if bad else 0
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -151,6 +288,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import memory
 
         return memory.main(["--records", str(args.records)])
+    if args.what == "memory-kill":
+        from aeroweaver_edge.bench import memory_kill
+
+        return memory_kill.main(["--kills", str(args.kills)])
     if args.what == "reference":
         from aeroweaver_edge.bench import reference
 
@@ -166,7 +307,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         if args.in_process:
             argv.append("--in-process")
         return scale.main(argv)
-    raise SystemExit(f"unknown benchmark {args.what!r}")
+    raise AssertionError(f"unknown benchmark {args.what!r}")  # argparse choices
 
 
 def _add_llm_flags(p: argparse.ArgumentParser) -> None:
@@ -175,21 +316,19 @@ def _add_llm_flags(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--model", help="model name at that endpoint")
     p.add_argument("--api-key-env", help="name of the environment variable holding the API key")
-    p.add_argument("--llm-deadline", type=float, help="seconds per LLM decision (default 20)")
+    p.add_argument("--llm-deadline", type=finite(), help="seconds per LLM decision (default 20)")
 
 
-def _swarm_size(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of UAVs: {text!r}") from None
-    if not 1 <= n <= defaults.MAX_UAVS:
-        raise argparse.ArgumentTypeError(f"must be 1..{defaults.MAX_UAVS} UAVs, got {n}")
-    return n
+PROBE_EPILOG = (
+    "exit status: 0 ok; 3 usable without correction (logprobs rejected, degenerate or low "
+    "label mass); 4 auth refused (401/403); 5 not found (404: URL or model); 6 unreachable "
+    "(refused, DNS); 7 timeout; 8 other endpoint failure (bad request, 5xx, not a chat API); "
+    "2 usage error"
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="aeroweaver", description=__doc__)
+    p = ArgumentParser(prog="aeroweaver", description=__doc__.split("\n")[0])
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -204,31 +343,46 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--mission", help='natural-language mission, e.g. "Cover the three landmarks"')
     s.add_argument(
         "--uavs",
-        type=_swarm_size,
+        type=int_in(1, MAX_UAVS),
         default=None,
-        help=f"UAVs we fly, 1..{defaults.MAX_UAVS} (default: the task's team, or the mission's)",
+        help=f"UAVs we fly, 1..{MAX_UAVS} (default: the task's team, or the mission's)",
     )
     s.add_argument("--seed", type=int, default=1)
-    s.add_argument("--episodes", type=int, default=1)
-    s.add_argument("--rounds", type=int, default=defaults.MAX_ROUNDS, help="horizon in rounds")
+    s.add_argument("--episodes", type=int_in(1), default=1)
+    s.add_argument(
+        "--rounds", type=int_in(1), default=defaults.MAX_ROUNDS, help="horizon in rounds"
+    )
     s.add_argument("--processes", action="store_true", help="one OS process per daemon")
     s.add_argument("--selector", choices=["llm", "scripted"], default="llm")
     s.add_argument(
-        "--beta", type=float, default=defaults.BETA, help="experience correction weight (0: plain)"
+        "--beta",
+        type=finite(strict=False),
+        default=defaults.BETA,
+        help="experience correction weight, >= 0 (0: plain)",
     )
     s.add_argument(
-        "--top-k", type=int, default=defaults.TOP_K, help="task skills activated per UAV"
+        "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"
     )
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
     s.add_argument(
-        "--deadline", type=float, default=defaults.DEADLINE_S, help="seconds a round may take"
+        "--deadline",
+        type=finite(),
+        default=defaults.DEADLINE_S,
+        help="seconds a round may take (> 0)",
     )
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
     s.add_argument("--quiet", action="store_true", help="no per-round view")
     _add_llm_flags(s)
     s.set_defaults(func=cmd_sim)
 
-    d = sub.add_parser("daemon", help="run one UAV daemon")
+    d = sub.add_parser(
+        "daemon",
+        help="run one UAV daemon",
+        description="Run one UAV daemon. Under systemd (Type=notify) it sends READY=1 once "
+        "its mesh is open and its vehicle link started, WATCHDOG=1 while its event loop "
+        "keeps up, STOPPING=1 on SIGTERM, and exits 0. Skills come from "
+        "$AEROWEAVER_SKILLS_DIR if set.",
+    )
     d.add_argument("--config", required=True, help="uav.toml (or .json)")
     d.set_defaults(func=cmd_daemon)
 
@@ -240,31 +394,52 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument("--connect", action="append", help="zenoh endpoint of a daemon or router")
     ms.add_argument("--listen", action="append", help="zenoh endpoint to listen on")
     ms.add_argument("--namespace", help="zenoh namespace of the swarm")
-    ms.add_argument("--roster-wait", type=float, default=3.0, help="seconds to discover daemons")
+    ms.add_argument("--roster-wait", type=finite(), default=3.0, help="seconds to discover daemons")
     ms.add_argument("--sim-world", action="store_true", help="also run the kinematic world")
     ms.add_argument("--seed", type=int, default=1)
-    ms.add_argument("--episodes", type=int, default=1)
-    ms.add_argument("--rounds", type=int, default=defaults.MAX_ROUNDS)
+    ms.add_argument("--episodes", type=int_in(1), default=1)
+    ms.add_argument("--rounds", type=int_in(1), default=defaults.MAX_ROUNDS)
     ms.add_argument("--no-llm", action="store_true", help="rule-based parsing and roles only")
     ms.add_argument(
-        "--top-k", type=int, default=defaults.TOP_K, help="task skills activated per UAV"
+        "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"
     )
     ms.add_argument("--json", metavar="PATH", help="write task record, assignments, outcome")
     _add_llm_flags(ms)
     ms.set_defaults(func=cmd_mission)
 
-    pr = sub.add_parser("probe", help="classify an endpoint's logprob support")
+    pr = sub.add_parser("probe", help="classify an endpoint's logprob support", epilog=PROBE_EPILOG)
     _add_llm_flags(pr)
     pr.set_defaults(func=cmd_probe)
 
+    mem = sub.add_parser("memory", help="inspect experience-memory files (read-only)")
+    memsub = mem.add_subparsers(dest="memory_command", required=True)
+    mst = memsub.add_parser("stats", help="record counts by task and role")
+    mst.add_argument("dir", help="a --memory-dir (or one memory file)")
+    mst.add_argument("--json", action="store_true", help="print the counts as JSON")
+    mex = memsub.add_parser("export", help="every record as JSON lines")
+    mex.add_argument("dir", help="a --memory-dir (or one memory file)")
+    mex.add_argument("-o", "--output", metavar="PATH", help="write here instead of stdout")
+    mck = memsub.add_parser(
+        "check", help="integrity and consistency; exit 1 when a file has problems"
+    )
+    mck.add_argument("dir", help="a --memory-dir (or one memory file)")
+    mem.set_defaults(func=cmd_memory)
+
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=["memory", "scale", "reference"])
-    b.add_argument("--records", type=int, default=10_000, help="memory: records per role")
+    b.add_argument("what", choices=["memory", "memory-kill", "scale", "reference"])
+    b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
+    b.add_argument("--kills", type=int_in(1), default=200, help="memory-kill: SIGKILLs")
     b.add_argument(
-        "--sizes", type=_swarm_size, nargs="+", default=[3, 10, 25, 50], help="scale: swarm sizes"
+        "--sizes",
+        type=int_in(1, MAX_UAVS),
+        nargs="+",
+        default=[3, 10, 25, 50],
+        help="scale: swarm sizes",
     )
     b.add_argument("--task", choices=TASK_NAMES, default="coverage", help="scale: task")
-    b.add_argument("--rounds", type=int, default=defaults.MAX_ROUNDS, help="scale: rounds per run")
+    b.add_argument(
+        "--rounds", type=int_in(1), default=defaults.MAX_ROUNDS, help="scale: rounds per run"
+    )
     b.add_argument("--seed", type=int, default=1, help="scale: layout seed")
     b.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="reference: seeds")
     b.add_argument("--tasks", nargs="+", choices=TASK_NAMES, help="reference: tasks (all)")
@@ -284,19 +459,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         return int(args.func(args))
-    except ConfigError as exc:
-        print(f"aeroweaver: config error: {exc}", file=sys.stderr)
-        return 2
-    except UserError as exc:
-        from commander.mission_parser import MissionParseError
-
-        what = "cannot understand the mission" if isinstance(exc, MissionParseError) else "error"
-        print(f"aeroweaver: {what}: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         return 130
-    except asyncio.CancelledError:
+    except (Stopped, asyncio.CancelledError):
         return 130
+    except Exception as exc:
+        return report(exc, verbose=args.verbose)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,18 @@ from aeroweaver_edge import defaults as d
 from aeroweaver_edge.errors import UserError
 
 _ID_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_-")
+_RUN_CHARS = _ID_CHARS | set("ABCDEFGHIJKLMNOPQRSTUVWXYZ.:")
+
+MAX_UAVS = d.MAX_UAVS
+"""Largest simulated swarm (``aeroweaver sim --uavs``, ``SimConfig.uavs``): the one bound."""
+
+# Documented bounds of the safety envelope (docs/reliability.md). Anything outside is a
+# typo or a unit mistake, never a real envelope: a fence of +-1e9 m or a 1e6 m/s cap is no
+# fence and no cap, and a zero separation turns collision avoidance off.
+GEOFENCE_LIMIT_M = 10_000.0  # every geofence bound within +-10 km of home
+ALTITUDE_LIMIT_M = 1_500.0  # altitude band within 0 .. 1500 m
+MAX_SPEED_LIMIT_MPS = 60.0  # speed cap within (0, 60] m/s
+SEPARATION_RANGE_M = (0.5, 100.0)  # minimum separation within 0.5 .. 100 m
 
 
 def _check_id(value: str, what: str) -> str:
@@ -70,8 +82,21 @@ class AgentConfig(_Section):
     gamma: float = Field(default=d.GAMMA, ge=0, le=1)
     neighbourhood: int = Field(default=d.NEIGHBOURHOOD, ge=1)
     memory_path: str | None = None  # None: in-memory SQLite (lost on exit)
+    # A configured memory that cannot be opened or written stops the daemon with a clear
+    # error; false: it runs on with memory in RAM / dropped writes (and says so in the log).
+    memory_required: bool = True
+    # Run identity stamped on every record (the simulator gives its daemons one per run);
+    # None: a new one at each daemon start, so runs never collide in a shared memory file.
+    run_id: str | None = Field(default=None, min_length=1, max_length=64)
     share_experience: bool = True
     max_labels: int = Field(default=26, ge=2, le=26)
+
+    @field_validator("run_id")
+    @classmethod
+    def _run_id(cls, value: str | None) -> str | None:
+        if value is not None and not set(value) <= _RUN_CHARS:
+            raise ValueError(f"run id {value!r} may hold only letters, digits and _ - . :")
+        return value
 
 
 class SafetyConfig(_Section):
@@ -83,14 +108,30 @@ class SafetyConfig(_Section):
     geofence_north_m: tuple[float, float] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
     geofence_east_m: tuple[float, float] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
     altitude_band_m: tuple[float, float] = (2.0, 60.0)
-    max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0)
-    min_separation_m: float = Field(default=d.MIN_SEPARATION_M, ge=0)
+    max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0, le=MAX_SPEED_LIMIT_MPS)
+    min_separation_m: float = Field(
+        default=d.MIN_SEPARATION_M, ge=SEPARATION_RANGE_M[0], le=SEPARATION_RANGE_M[1]
+    )
 
     @field_validator("geofence_north_m", "geofence_east_m", "altitude_band_m")
     @classmethod
     def _ordered(cls, value: tuple[float, float]) -> tuple[float, float]:
         if value[0] >= value[1]:
             raise ValueError(f"lower bound {value[0]} must be below upper bound {value[1]}")
+        return value
+
+    @field_validator("geofence_north_m", "geofence_east_m")
+    @classmethod
+    def _fence_bounded(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if max(abs(value[0]), abs(value[1])) > GEOFENCE_LIMIT_M:
+            raise ValueError(f"{list(value)} reaches beyond +-{GEOFENCE_LIMIT_M:g} m of home")
+        return value
+
+    @field_validator("altitude_band_m")
+    @classmethod
+    def _band_bounded(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if value[0] < 0 or value[1] > ALTITUDE_LIMIT_M:
+            raise ValueError(f"{list(value)} must lie within 0 .. {ALTITUDE_LIMIT_M:g} m")
         return value
 
 
@@ -135,7 +176,7 @@ class SimConfig(_Section):
     """A simulated episode: world settings shared by the world and the runner."""
 
     task: str = "coverage"
-    uavs: int = Field(default=3, ge=1, le=d.MAX_UAVS)
+    uavs: int = Field(default=3, ge=1, le=MAX_UAVS)
     seed: int = 1
     max_rounds: int = Field(default=d.MAX_ROUNDS, ge=1)
     round_s: float = Field(default=d.ROUND_S, gt=0)
@@ -147,7 +188,13 @@ class SimConfig(_Section):
 
 
 class ConfigError(UserError):
-    """A config file could not be used; the message names the file and the key."""
+    """A config file could not be used; the message names the file and the key, ``fix``
+    (when there is a better one than "correct that setting") says what to do."""
+
+    def __init__(self, message: str, fix: str = "") -> None:
+        ValueError.__init__(self, message)  # str(): the message alone; cli_errors adds the fix
+        self.cause = message
+        self.fix = fix
 
 
 M = TypeVar("M", bound=BaseModel)
@@ -164,7 +211,9 @@ def parse_config(data: dict[str, Any], model: type[M], source: str = "<config>")
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        problems = "; ".join(f"{_loc(e['loc'])}: {e['msg']}" for e in exc.errors())
+        problems = "; ".join(
+            f"{_loc(e['loc'])}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors()
+        )
         raise ConfigError(f"{source}: {problems}") from None
 
 
@@ -175,6 +224,11 @@ def load_config(path: str | Path, model: type[M]) -> M:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})",
+            "save the file as UTF-8",
+        ) from None
     try:
         data = json.loads(text) if path.suffix == ".json" else tomllib.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:

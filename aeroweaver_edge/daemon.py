@@ -11,12 +11,13 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
+from aeroweaver_edge.hold_reasons import count_causes
 from aeroweaver_edge.inbox import within
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.mission_state import MissionState
@@ -49,17 +50,24 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 
+def _llm_requests(selector: Selector) -> int:
+    """Requests the selector has sent so far (LLM selectors count them; others send none):
+    counted around the round, so a request cut off by the deadline still counts."""
+    return int(getattr(selector, "requests_sent", 0))
+
+
 @dataclass
 class DaemonStats:
     rounds: int = 0
     holds: int = 0
     invalid_choices: int = 0  # holds because no usable label came back
-    deadline_misses: int = 0
+    deadline_misses: int = 0  # rounds this daemon did not finish within its own deadline
+    holds_by_cause: dict[str, int] = field(default_factory=lambda: count_causes(()))
     messages_sent: int = 0
     messages_dropped: int = 0
     prompt_tokens: int = 0
     completion_tokens: int = 0
-    llm_calls: int = 0
+    llm_calls: int = 0  # requests sent to the LLM endpoint, answered or not
     corrected: int = 0
     experience_shared: int = 0
     experience_ingested: int = 0
@@ -221,10 +229,12 @@ class UavDaemon:
                 view = self.mission.view()
                 await self._warm(view)
                 self._route(view)
+                sent_before = _llm_requests(self.rc.selector)
                 out = await run_round(self.rc, tick, view)
                 await self.ports.clock.finish(tick, sent=out.sent, guess=out.guess)
-                self._account(out)
-                self._report(out, view)
+                calls = _llm_requests(self.rc.selector) - sent_before
+                self._account(out, calls)
+                self._report(out, view, calls)
                 await self._remember(out, view)
                 if self._on_round is not None:
                     await self._on_round(out)
@@ -253,22 +263,25 @@ class UavDaemon:
         self._warmed = (view.task, view.role)
         await self.memory.warm(view.task, view.role)
 
-    def _account(self, out: RoundOutcome) -> None:
+    def _account(self, out: RoundOutcome, llm_calls: int) -> None:
         s = self.stats
         s.rounds += 1
         s.holds += out.held
-        s.deadline_misses += out.reason == "deadline"
-        s.invalid_choices += out.held and not out.chosen_by_agent and out.scores is not None
+        s.deadline_misses += out.hold_cause == "deadline"
+        s.invalid_choices += out.hold_cause == "invalid_answer"
+        if out.hold_cause is not None:
+            s.holds_by_cause[out.hold_cause] += 1
         s.messages_sent += len(out.sent)
         s.messages_dropped += out.dropped
         s.corrected += out.corrected
+        s.llm_calls += llm_calls
         if out.scores is not None:
             s.prompt_tokens += out.scores.prompt_tokens
             s.completion_tokens += out.scores.completion_tokens
-            s.llm_calls += out.scores.prompt_tokens > 0 or out.scores.completion_tokens > 0
 
-    def _report(self, out: RoundOutcome, view: MissionView | None) -> None:
+    def _report(self, out: RoundOutcome, view: MissionView | None, llm_calls: int) -> None:
         sc = out.scores
+        llm_class = sc.extra.get("probe", "") if sc is not None else ""
         self.mesh.put(
             self.keys.report(self.uav),
             ProgressReport(
@@ -283,6 +296,7 @@ class UavDaemon:
                 label=out.label,
                 held=out.held,
                 hold_reason=out.hold_reason,
+                hold_cause=out.hold_cause,
                 reward=self._last_reward,
                 prompt_tokens=sc.prompt_tokens if sc else 0,
                 completion_tokens=sc.completion_tokens if sc else 0,
@@ -292,6 +306,8 @@ class UavDaemon:
                 messages_dropped=out.dropped,
                 decode_errors=self.mesh.codec.stats.total,
                 corrected=out.corrected,
+                llm_calls=llm_calls,
+                llm_class=str(llm_class),
             ),
         )
 

@@ -21,6 +21,7 @@ from aeroweaver_edge.agent.describe import describe
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.defaults import ALTITUDE_M, HOLD_SKILL
+from aeroweaver_edge.hold_reasons import HoldCause, after_gate
 from aeroweaver_edge.observation import MissionView, Observation
 from aeroweaver_edge.ports import (
     DecisionRequest,
@@ -68,6 +69,7 @@ class RoundOutcome:
     violations: tuple[str, ...] = ()
     chosen_by_agent: bool = False  # False when an error, not the selector, produced the hold
     guess: str | None = None  # what a guessing skill recorded this round (the world scores it)
+    hold_cause: HoldCause | None = None  # why it held (None: it did not)
 
 
 @dataclass
@@ -107,13 +109,14 @@ def _execute(
     choice: Choice,
     obs: Observation,
     ctx: SkillContext,
-) -> Intent:
+) -> Intent | None:
+    """The skill's intent, or ``None`` when its executor raised (the round holds)."""
     assert choice.label is not None
     try:
         return rc.registry.get(skill).execute(cs.params[choice.label], obs, ctx)
     except Exception:  # an executor bug must not take the UAV with it
         log.exception("%s: executor %s failed; holding", rc.uav, skill)
-        return HOLD
+        return None
 
 
 async def _apply(rc: RoundContext, gated: GatedCommand) -> None:
@@ -139,6 +142,7 @@ async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None)
             hold_reason=f"missed the {budget:.1f} s round deadline",
             reason="deadline",
             latency_s=time.monotonic() - started,
+            hold_cause="deadline",
         )
     return replace(out, cpu_s=time.thread_time() - cpu)
 
@@ -146,6 +150,7 @@ async def run_round(rc: RoundContext, tick: RoundTick, view: MissionView | None)
 def _held(
     tick: RoundTick,
     why: str,
+    cause: HoldCause,
     state_text: str,
     started: float,
     scores: LabelScores | None = None,
@@ -161,6 +166,7 @@ def _held(
         latency_s=time.monotonic() - started,
         scores=scores,
         n_candidates=n_candidates,
+        hold_cause=cause,
     )
 
 
@@ -193,7 +199,7 @@ async def _decide_and_act(
     state_text = describe(obs)
     if view is None:
         await rc.vehicle.hold()
-        return _held(tick, "no mission assignment yet", state_text, started)
+        return _held(tick, "no mission assignment yet", "no_assignment", state_text, started)
 
     # 3. Candidates from the active subset.
     ctx = SkillContext(
@@ -209,10 +215,12 @@ async def _decide_and_act(
     cs = build_candidates(rc.registry, view.skills, obs, ctx, budget)
     if cs.overflow:
         await rc.vehicle.hold()
-        return _held(tick, f"{cs.overflow} options beyond the label budget", state_text, started)
+        why = f"{cs.overflow} options beyond the label budget"
+        return _held(tick, why, "no_candidates", state_text, started)
     if not cs.candidates:
         await rc.vehicle.hold()
-        return _held(tick, "no callable skill in the active subset", state_text, started)
+        why = "no callable skill in the active subset"
+        return _held(tick, why, "no_candidates", state_text, started)
 
     # 4. Select: base scores from the selector, corrected by experience.
     request = DecisionRequest(
@@ -231,13 +239,21 @@ async def _decide_and_act(
     choice = choose(scores, cs.labels, advantages, rc.agent.beta)
     if choice.label is None:
         await rc.vehicle.hold()
+        cause: HoldCause = "llm_failure" if scores.error is not None else "invalid_answer"
         return _held(
-            tick, choice.reason, state_text, started, scores=scores, n_candidates=len(cs.candidates)
+            tick,
+            choice.reason,
+            cause,
+            state_text,
+            started,
+            scores=scores,
+            n_candidates=len(cs.candidates),
         )
     cand = next(c for c in cs.candidates if c.label == choice.label)
 
     # 5. Gate and execute on this UAV's own vehicle only.
-    intent = _execute(rc, cand.skill, cs, choice, obs, ctx)
+    executed = _execute(rc, cand.skill, cs, choice, obs, ctx)
+    intent = HOLD if executed is None else executed
     neighbours = [e.pos for e in obs.peers()]
     gated = rc.gate.gate(intent.motion, own.pos, neighbours)
     await _apply(rc, gated)
@@ -272,4 +288,5 @@ async def _decide_and_act(
         violations=gated.violations,
         chosen_by_agent=True,
         guess=intent.memo.get("guess"),
+        hold_cause=after_gate(gated.held, executed is None, gated.violations),
     )

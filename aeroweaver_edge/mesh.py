@@ -83,8 +83,13 @@ def build_zenoh_config(cfg: MeshConfig) -> zenoh.Config:
     ]
     if cfg.namespace:
         settings.append(("namespace", cfg.namespace))
+    names = {"listen/endpoints": "mesh.listen", "connect/endpoints": "mesh.connect",
+             "namespace": "mesh.namespace"}  # fmt: skip
     for path, value in settings:
-        conf.insert_json5(path, json.dumps(value))
+        try:
+            conf.insert_json5(path, json.dumps(value))
+        except (zenoh.ZError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{names.get(path, path)} = {value!r}: {_zerror_text(exc)}") from None
     for path, text in cfg.zenoh_overrides.items():
         try:
             conf.insert_json5(path, text)
@@ -96,8 +101,12 @@ def build_zenoh_config(cfg: MeshConfig) -> zenoh.Config:
 
 
 def _zerror_text(exc: Exception) -> str:
-    """A ZError's message without the Rust source location zenoh appends."""
-    return str(exc).split(" at /", 1)[0].strip()
+    """A ZError's message without the Rust source location and JSON5 wrapping zenoh adds."""
+    text = str(exc)
+    inner = text.split('msg: "', 1)
+    if len(inner) == 2:  # Json5Err(Message { msg: "<the message> at /src/...", ... })
+        text = inner[1]
+    return text.split(" at /", 1)[0].strip().rstrip('"')
 
 
 _log_initialised = False

@@ -18,6 +18,7 @@ import hashlib
 import importlib.util
 import inspect
 import json
+import os
 import re
 import sys
 import traceback
@@ -275,13 +276,20 @@ class SkillRegistry:
 # --------------------------------------------------------------------------- loader
 
 
+SKILLS_DIR_ENV = "AEROWEAVER_SKILLS_DIR"
+
+
 def default_root() -> Path:
-    """The shipped ``skills`` package directory: the sibling of ``aeroweaver_edge``.
+    """``$AEROWEAVER_SKILLS_DIR`` if set, else the shipped ``skills`` package directory:
+    the sibling of ``aeroweaver_edge``.
 
     Found by location, not by ``import skills``: that generic top-level name is easily
     shadowed (e.g. by ``tests/skills`` as a namespace package when ``tests/`` is on
     ``sys.path``, or by an unrelated distribution), and both packages ship in one wheel.
     """
+    override = os.environ.get(SKILLS_DIR_ENV)
+    if override:
+        return Path(override)
     return Path(__file__).resolve().parent.parent / "skills"
 
 

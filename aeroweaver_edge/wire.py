@@ -16,6 +16,8 @@ from typing import Annotated, Any, Final, Literal, TypeVar
 
 import msgspec
 
+from aeroweaver_edge.hold_reasons import HoldCause
+
 SCHEMA_VERSION: Final = 1
 MAX_PAYLOAD_BYTES: Final = 64 * 1024
 MAX_TEXT: Final = 4096
@@ -84,6 +86,7 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     label: str | None
     held: bool
     hold_reason: str | None = None
+    hold_cause: HoldCause | None = None  # the closed set of hold_reasons.HOLD_CAUSES
     reward: float | None = None
     prompt_tokens: int = 0
     completion_tokens: int = 0
@@ -93,6 +96,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     messages_dropped: int = 0
     decode_errors: int = 0  # cumulative payloads this daemon rejected
     corrected: bool = False  # the experience correction changed the pick
+    llm_calls: int = 0  # requests sent to the LLM endpoint this round (answered or not)
+    llm_class: str = ""  # the selector's current logprob class (probe kind), if any
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):
@@ -134,6 +139,7 @@ class ExperienceRecord(msgspec.Struct, frozen=True, kw_only=True, tag="exp"):
     ret: float | None = None
     final: bool = False
     reward_source: str = ""
+    run: str = ""  # the publisher's run identity: part of the deduplication key
 
 
 class Entity(msgspec.Struct, frozen=True, kw_only=True):

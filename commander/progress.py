@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
+from aeroweaver_edge.hold_reasons import count_causes
 from aeroweaver_edge.wire import ProgressReport
 
 
@@ -19,7 +20,10 @@ class UavProgress:
     completion_tokens: int = 0
     messages_sent: int = 0
     messages_dropped: int = 0
-    llm_calls: int = 0
+    llm_calls: int = 0  # requests sent to the LLM endpoint (answered or not)
+    llm_class: str = ""  # the selector's latest logprob class (probe kind)
+    deadline_misses: int = 0  # rounds the daemon did not finish within its deadline
+    holds_by_cause: dict[str, int] = field(default_factory=lambda: count_causes(()))
     # Per-round latency, bounded: a long field mission must not grow the Commander.
     latencies_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
     cpu_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
@@ -45,11 +49,15 @@ class ProgressBoard:
         p.last = rep
         p.reports += 1
         p.holds += rep.held
+        if rep.hold_cause is not None:
+            p.holds_by_cause[rep.hold_cause] += 1
+        p.deadline_misses += rep.hold_cause == "deadline"
+        p.llm_class = rep.llm_class or p.llm_class
         p.prompt_tokens += rep.prompt_tokens
         p.completion_tokens += rep.completion_tokens
         p.messages_sent += rep.messages_sent
         p.messages_dropped += rep.messages_dropped
-        p.llm_calls += rep.prompt_tokens > 0
+        p.llm_calls += rep.llm_calls
         p.latencies_s.append(rep.latency_s)
         p.cpu_s.append(rep.cpu_s)
         tokens = rep.prompt_tokens + rep.completion_tokens

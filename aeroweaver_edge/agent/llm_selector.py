@@ -9,8 +9,11 @@ How logprobs are used follows the endpoint probe (``llm.probe``):
   round) and the generated text label is used; correction off;
 * ``degenerate`` / ``low_label_mass`` — logprobs are still requested (harmless, useful for
   diagnostics) but the generated text label decides; correction off;
-* ``unreachable`` or no probe — unknown: the first real answer (or a 400 refusal) decides
-  the class, so an endpoint that was down at start-up is not stuck without correction.
+* no verdict (``unreachable``, ``timeout``, ``auth``, ... or no probe) — unknown: the first
+  real answer decides the class, so an endpoint that was down at start-up is not stuck
+  without correction. A 400/422 while the class is unknown is retried once without logprob
+  parameters: only if that answers were logprobs the cause (``rejected``); a refusal that
+  stays (context length, wrong model) is an LLM failure of that round and decides nothing.
 """
 
 from __future__ import annotations
@@ -22,9 +25,14 @@ from typing import Any
 
 from aeroweaver_edge.agent.prompt import PromptLimits, build_messages
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
+from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError
 from aeroweaver_edge.llm.logprobs import parse_label_scores
-from aeroweaver_edge.llm.probe import ProbeResult, classify_error, classify_response
+from aeroweaver_edge.llm.probe import (
+    ProbeResult,
+    classify_response,
+    may_be_logprobs,
+    refused_logprobs,
+)
 from aeroweaver_edge.ports import DecisionRequest
 from aeroweaver_edge.scores import LabelScores
 
@@ -61,18 +69,34 @@ class LLMSelector:
 
     @property
     def settled(self) -> bool:
-        """Whether the endpoint's logprob class is known (probe answered)."""
-        return self.probe is not None and self.probe.kind != "unreachable"
+        """Whether the endpoint's logprob class is known (a verdict, not a failure)."""
+        return self.probe is not None and self.probe.verdict
+
+    @property
+    def requests_sent(self) -> int:
+        """HTTP requests this selector's client has sent (the daemon's ``llm_calls``)."""
+        return self.client.requests_sent
+
+    @property
+    def llm_class(self) -> str:
+        return self.probe.kind if self.probe is not None else "unprobed"
 
     @property
     def correction_on(self) -> bool:
         return not self.settled or (self.probe is not None and self.probe.correction_on)
 
-    def _params(self) -> dict[str, Any]:
+    def _params(self, *, logprobs: bool = True) -> dict[str, Any]:
         params: dict[str, Any] = {"max_tokens": 1, "temperature": self.cfg.temperature}
-        if not (self.probe is not None and self.probe.kind == "rejected"):
+        if logprobs and not (self.probe is not None and self.probe.kind == "rejected"):
             params.update(logprobs=True, top_logprobs=self.cfg.top_logprobs)
         return params
+
+    def _failed(self, exc: LLMError) -> LabelScores:
+        return LabelScores(
+            logprobs={},
+            error=str(exc),
+            extra={"error_kind": type(exc).__name__, "probe": self.llm_class},
+        )
 
     def _settle(self, probe: ProbeResult) -> None:
         self.probe = probe
@@ -100,16 +124,20 @@ class LLMSelector:
         obs = request.observation
         tag = CallTag(self.agent or obs.uav, request.role, obs.episode, obs.round, "decide")
         params = self._params()
+        messages = build_messages(request, limits=self._limits)
         try:
-            result = await self.client.chat(
-                build_messages(request, limits=self._limits), tag=tag, **params
-            )
-        except LLMError as exc:
-            if not self.settled and isinstance(exc, LLMHTTPError) and exc.status in (400, 422):
-                self._settle(classify_error(exc, model=self.client.model))
-            return LabelScores(
-                logprobs={}, error=str(exc), extra={"error_kind": type(exc).__name__}
-            )
+            try:
+                result = await self.client.chat(messages, tag=tag, **params)
+            except LLMError as exc:
+                if self.settled or "logprobs" not in params or not may_be_logprobs(exc):
+                    return self._failed(exc)
+                plain = self._params(logprobs=False)
+                try:  # the same request without logprob parameters tells what was refused
+                    result = await self.client.chat(messages, tag=tag, **plain)
+                except LLMError:
+                    return self._failed(exc)  # refused either way: not about logprobs
+                self._settle(replace(refused_logprobs(exc), model=self.client.model))
+                params = plain
         except Exception as exc:  # never into the round loop
             log.exception("LLM selector failed unexpectedly")
             return LabelScores(logprobs={}, error=f"unexpected {type(exc).__name__}: {exc}")

@@ -1,22 +1,36 @@
 """Role-indexed experience memory (DESIGN §4 step 8 and §5).
 
 Storage
-    One SQLite file per daemon in WAL mode (``path=None``: in-memory). ``records`` holds
-    one row per decision, unique on (uav, episode, round); ``rewards`` holds every reward
-    as delivered, unique on the same key, which makes reward delivery idempotent and lets
-    a record that is appended *after* its reward (or after a later reward) still get the
-    right return. ``schema_version`` and ``meta`` (tokeniser version, gamma) let a later
-    release migrate or rebuild. ``PRAGMA integrity_check`` runs at open; a corrupt or
-    foreign file is renamed aside (``<name>.corrupt-<utc>``) and a fresh one is created:
-    memory is advisory, never safety-critical. Write errors (disk full, read-only, I/O)
-    are logged at a limited rate, counted and dropped; they never reach the round loop.
+    One SQLite file per daemon in WAL mode (``path=None``: in-memory). Every writer has a
+    *run* identity (``run``: one per daemon start, or one per simulated run, shared by its
+    daemons), so a second run on the same file never collides with the first: ``records``
+    holds one row per decision, unique on (run, uav, episode, round); ``rewards`` holds
+    every reward as delivered, unique on the same key, which makes reward delivery
+    idempotent, attaches a reward only to a decision of its own run, and lets a record
+    that is appended *after* its reward (or after a later reward) still get the right
+    return. ``schema_version`` and ``meta`` (tokeniser version, gamma) let a later release
+    migrate or rebuild; a version-1 file (no run column) is migrated in place, its rows
+    under run ``"v1"``; a file from a newer release is refused, never rewritten.
+    ``PRAGMA integrity_check`` runs at open; a corrupt or foreign file is renamed aside
+    (``<name>.corrupt-<utc>``) and a fresh one is created.
+
+Concurrency and failure
+    Several processes may write one file: WAL, a busy timeout (``BUSY_TIMEOUT_S``) and one
+    ``BEGIN IMMEDIATE`` transaction per write, so a write either commits whole or not at
+    all and a concurrent writer waits instead of failing. A committed write survives a
+    crash of the process (``kill -9``; see ``bench/memory_kill.py``); ``durable=True`` also
+    survives power loss. ``required=True`` (the daemon's default when a path is
+    configured, ``agent.memory_required``) makes an unusable file or a failed write raise
+    ``MemoryUnavailable``, so the daemon says so and stops rather than silently losing
+    experience; with ``required=False`` the memory falls back to RAM (unusable file) or
+    logs, counts and drops the write (memory is advisory, never safety-critical).
 
 Returns
     G_t = sum over delivered rewards r_u with u >= t of gamma^(u-t) * r_u, per trajectory
-    (uav, episode). A record has no return (``None``) until a reward at or after its round
-    arrives. Only records this memory appended itself (``origin == ""``) are credited by
-    ``add_reward``; a peer's records carry the peer's own return and are replaced by a
-    newer version through ``ingest``.
+    (run, uav, episode). A record has no return (``None``) until a reward at or after its
+    round arrives. Only records this memory appended itself (``origin == ""``) in its own
+    run are credited by ``add_reward``; a peer's records carry the peer's own return and
+    are replaced by a newer version through ``ingest``.
 
 Retrieval (the exact algorithm of DESIGN §5)
     Exact (task, role) match; eligible records are those with a return -- by default any
@@ -36,7 +50,8 @@ Retrieval (the exact algorithm of DESIGN §5)
 Speed
     SQLite is the durable store; retrieval runs on an in-memory inverted index per
     (task, role), loaded lazily from the table on first use and kept in sync on every
-    write. Posting lists and per-record columns are ``array`` buffers. A query over a large
+    write of this process (rows another process writes meanwhile join at the next open).
+    Posting lists and per-record columns are ``array`` buffers. A query over a large
     group is one ``numpy.bincount`` over the postings of the query's tokens -- O(postings)
     with no Python loop over records -- then an O(n) threshold selection for the top K.
     Groups of up to ``SMALL_GROUP`` records (every simulated episode of up to 50 UAVs) are
@@ -54,13 +69,14 @@ import logging
 import math
 import sqlite3
 import time
+import uuid
 from array import array
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Final, TypeVar
+from typing import Any, Final, Literal, TypeVar
 
 from aeroweaver_edge.agent.state_tokens import TOKENIZER_VERSION, tokenise
 from aeroweaver_edge.config import AgentConfig
@@ -71,17 +87,41 @@ log = logging.getLogger(__name__)
 SMALL_GROUP: Final = 2048
 """Largest (task, role) group scored in plain Python; larger ones use numpy."""
 
-SCHEMA_VERSION: Final = 1
+SCHEMA_VERSION: Final = 2
 LOCAL: Final = ""  # ``origin`` of records appended by this memory's own daemon
+LEGACY_RUN: Final = "v1"  # run of the rows migrated from a version-1 file
+BUSY_TIMEOUT_S: Final = 10.0  # a concurrent writer waits this long for the write lock
 
-Key = tuple[str, int, int]  # (uav, episode, round)
+Key = tuple[str, int, int]  # (uav, episode, round) within one run
+RunKey = tuple[str, str, int, int]  # (run, uav, episode, round): unique in a file
 T = TypeVar("T")
 
-_SCHEMA = """
+
+class MemoryUnavailable(RuntimeError):
+    """The experience memory cannot be opened or written, and it is required.
+
+    ``during`` is ``"open"`` (start-up: a configuration or environment problem) or
+    ``"write"`` (a write failed mid-run: disk full, read-only, I/O error)."""
+
+    def __init__(self, message: str, *, during: Literal["open", "write"]) -> None:
+        super().__init__(message)
+        self.during = during
+
+
+def new_run_id() -> str:
+    """A sortable, unique run identity: ``<UTC time>-<8 hex>``."""
+    return datetime.now(UTC).strftime("%Y%m%dT%H%M%S") + "-" + uuid.uuid4().hex[:8]
+
+
+_META = """
 CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL);
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL) WITHOUT ROWID;
+"""
+
+_TABLES = """
 CREATE TABLE IF NOT EXISTS records (
     seq           INTEGER PRIMARY KEY AUTOINCREMENT,  -- created order: the recency tie-break
+    run           TEXT    NOT NULL,                   -- writer's run identity
     task          TEXT    NOT NULL,
     role          TEXT    NOT NULL,
     uav           TEXT    NOT NULL,
@@ -99,22 +139,28 @@ CREATE TABLE IF NOT EXISTS records (
     src_epoch     INTEGER NOT NULL DEFAULT 0,         -- version of a peer's record
     src_seq       INTEGER NOT NULL DEFAULT 0,
     created_at    REAL    NOT NULL,
-    UNIQUE (uav, episode, round)
+    UNIQUE (run, uav, episode, round)
 );
 CREATE INDEX IF NOT EXISTS records_by_role ON records (task, role, seq);
 CREATE TABLE IF NOT EXISTS rewards (
+    run     TEXT    NOT NULL,
     uav     TEXT    NOT NULL,
     episode INTEGER NOT NULL,
     round   INTEGER NOT NULL,
     reward  REAL    NOT NULL,
     source  TEXT    NOT NULL,
-    PRIMARY KEY (uav, episode, round)
+    PRIMARY KEY (run, uav, episode, round)
 ) WITHOUT ROWID;
 """
 
+_V1_COLUMNS = (
+    "seq, task, role, uav, episode, round, state_text, tokens, skill, invocation, reward, ret, "
+    "final, origin, reward_source, src_epoch, src_seq, created_at"
+)
+
 _COLUMNS = (
     "seq, task, role, uav, episode, round, state_text, skill, invocation, reward, ret, final, "
-    "origin, reward_source"
+    "origin, reward_source, run"
 )
 
 
@@ -136,6 +182,7 @@ class StoredRecord:
     final: bool
     origin: str  # "" = appended by this daemon, else the peer that published it
     reward_source: str
+    run: str = ""
 
     def to_wire(self, h: Header) -> ExperienceRecord:
         """The payload a daemon publishes on ``.../experience`` (it supplies the header)."""
@@ -153,6 +200,7 @@ class StoredRecord:
             ret=self.ret,
             final=self.final,
             reward_source=self.reward_source,
+            run=self.run,
         )
 
 
@@ -165,6 +213,7 @@ class Neighbour:
     ret: float
     similarity: float
     seq: int
+    run: str = ""
 
 
 def skill_of(name: str) -> str:
@@ -198,14 +247,20 @@ class _Group:
         self.skills: list[str] = []
         self.skill_ids: dict[str, int] = {}
         self.postings: dict[str, array[int]] = {}
-        self.pos: dict[Key, int] = {}
-        self.keys: list[Key] = []
+        self.pos: dict[RunKey, int] = {}
+        self.keys: list[RunKey] = []
 
     def __len__(self) -> int:
         return len(self.seq)
 
     def add(
-        self, key: Key, seq: int, tokens: Iterable[str], skill: str, ret: float | None, final: bool
+        self,
+        key: RunKey,
+        seq: int,
+        tokens: Iterable[str],
+        skill: str,
+        ret: float | None,
+        final: bool,
     ) -> None:
         i = len(self.seq)
         n_tokens = 0
@@ -240,10 +295,14 @@ class ExperienceMemory:
         neighbourhood: int = 32,
         finalised_only: bool = False,
         durable: bool = False,
+        run: str | None = None,
+        required: bool = False,
     ) -> None:
         """``durable=True`` sets ``synchronous=FULL`` (commits survive power loss); the
         default ``NORMAL`` is crash-consistent and may lose the last commits on power loss,
-        which advisory memory can afford."""
+        which advisory memory can afford. ``run`` names this writer's run (default: a new
+        one); ``required`` turns an unusable file or a failed write into
+        ``MemoryUnavailable`` instead of a RAM fallback or a dropped write."""
         if not 0.0 <= gamma <= 1.0:
             raise ValueError(f"gamma {gamma} must be within [0, 1]")
         if neighbourhood < 1:
@@ -252,7 +311,10 @@ class ExperienceMemory:
         self.gamma = gamma
         self.neighbourhood = neighbourhood
         self.finalised_only = finalised_only
+        self.run = run or new_run_id()
+        self.required = required and self.path is not None
         self.quarantined: Path | None = None
+        self.migrated_from: int | None = None  # schema version this open migrated
         self.degraded: str | None = None  # why we fell back to an in-memory database
         self.write_errors = 0
         self._last_error_log = -math.inf
@@ -261,14 +323,21 @@ class ExperienceMemory:
         self._db = self._open()
 
     @classmethod
-    def from_config(cls, cfg: AgentConfig) -> ExperienceMemory:
-        return cls(cfg.memory_path, gamma=cfg.gamma, neighbourhood=cfg.neighbourhood)
+    def from_config(cls, cfg: AgentConfig, *, run: str | None = None) -> ExperienceMemory:
+        return cls(
+            cfg.memory_path,
+            gamma=cfg.gamma,
+            neighbourhood=cfg.neighbourhood,
+            run=run or cfg.run_id,
+            required=cfg.memory_required,
+        )
 
     # ------------------------------------------------------------------ opening
 
     def _open(self) -> sqlite3.Connection:
-        """A ready connection to ``path``; on any environmental failure (unwritable
-        directory, read-only file system, ...) an in-memory one, so the daemon flies on."""
+        """A ready connection to ``path``. On an environmental failure (unwritable
+        directory, read-only file system, a newer release's file, ...) raise
+        ``MemoryUnavailable`` if required, else fall back to an in-memory database."""
         if self.path is not None:
             conn: sqlite3.Connection | None = None
             try:
@@ -276,13 +345,19 @@ class ExperienceMemory:
                 problem = self._check(self.path)
                 if problem is not None:
                     self._quarantine(problem)
-                conn = sqlite3.connect(self.path, isolation_level=None, timeout=2.0)
+                conn = sqlite3.connect(self.path, isolation_level=None, timeout=BUSY_TIMEOUT_S)
                 self._prepare(conn)
                 return conn
-            except (OSError, sqlite3.Error) as exc:
+            except (OSError, sqlite3.Error, _NewerSchema) as exc:
                 if conn is not None:
                     conn.close()
-                self.degraded = f"{type(exc).__name__}: {exc}"
+                reason = str(exc) if isinstance(exc, _NewerSchema) else _why(exc)
+                if self.required:
+                    raise MemoryUnavailable(
+                        f"experience memory {self.path} cannot be used: {reason}",
+                        during="open",
+                    ) from None
+                self.degraded = reason
                 log.error(
                     "experience memory %s unusable (%s); using an in-memory database, "
                     "experience will not survive a restart",
@@ -295,10 +370,11 @@ class ExperienceMemory:
 
     @staticmethod
     def _check(path: Path) -> str | None:
-        """Why ``path`` cannot be used as our memory, or ``None`` if it can."""
+        """Why ``path`` must be set aside (corrupt, foreign), or ``None`` if it can be used.
+        Raises ``_NewerSchema`` for a newer release's file, which is never touched."""
         if not path.exists():
             return None
-        conn = sqlite3.connect(path, isolation_level=None, timeout=2.0)
+        conn = sqlite3.connect(path, isolation_level=None, timeout=BUSY_TIMEOUT_S)
         try:
             rows = conn.execute("PRAGMA integrity_check").fetchall()
             if rows != [("ok",)]:
@@ -307,10 +383,20 @@ class ExperienceMemory:
             if "schema_version" not in tables:
                 return None if not tables else f"not an experience memory (tables {sorted(tables)})"
             row = conn.execute("SELECT max(version) FROM schema_version").fetchone()
-            if row is None or row[0] is None or row[0] > SCHEMA_VERSION:
-                return f"schema version {row[0] if row else None} unknown to this release"
+            version = row[0] if row else None
+            if version is None:
+                return None  # created but never initialised (a writer died at its birth)
+            if not isinstance(version, int) or version < 1:
+                return f"schema version {version!r} is not valid"
+            if version > SCHEMA_VERSION:
+                raise _NewerSchema(
+                    f"schema version {version} comes from a newer release (this one reads "
+                    f"up to {SCHEMA_VERSION}); use that release or another memory path"
+                )
             return None
         except sqlite3.DatabaseError as exc:
+            if isinstance(exc, sqlite3.OperationalError) and _transient(exc):
+                raise  # locked or unreadable now: not a reason to set the file aside
             return f"{type(exc).__name__}: {exc}"
         finally:
             conn.close()
@@ -334,17 +420,27 @@ class ExperienceMemory:
         )
 
     def _prepare(self, conn: sqlite3.Connection) -> None:
-        """Pragmas, schema, and the rebuilds a changed tokeniser or gamma requires."""
+        """Pragmas, schema (created or migrated), and the rebuilds a changed tokeniser or
+        gamma requires. Every step is a transaction, so concurrent openers agree."""
+        conn.execute(f"PRAGMA busy_timeout={int(BUSY_TIMEOUT_S * 1000)}")
         mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
         if mode not in ("wal", "memory"):
             log.warning("experience memory: journal mode is %s, not WAL", mode)
         conn.execute(f"PRAGMA synchronous={'FULL' if self._durable else 'NORMAL'}")
-        conn.execute("PRAGMA busy_timeout=2000")
-        conn.executescript(_SCHEMA)  # commits on its own, hence outside a transaction
         self._db = conn
         with self._tx():
-            if conn.execute("SELECT count(*) FROM schema_version").fetchone()[0] == 0:
+            for statement in _statements(_META):
+                conn.execute(statement)
+            row = conn.execute("SELECT max(version) FROM schema_version").fetchone()
+            version = row[0] if row is not None else None
+            if version is None:
+                for statement in _statements(_TABLES):
+                    conn.execute(statement)
                 conn.execute("INSERT INTO schema_version VALUES (?)", (SCHEMA_VERSION,))
+            elif version == 1:
+                self._migrate_v1()
+            elif version > SCHEMA_VERSION:  # raced with a newer release's first open
+                raise _NewerSchema(f"schema version {version} comes from a newer release")
             meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
             if meta.get("tokenizer") != str(TOKENIZER_VERSION):
                 self._retokenise()
@@ -360,6 +456,37 @@ class ExperienceMemory:
                 [("tokenizer", str(TOKENIZER_VERSION)), ("gamma", repr(self.gamma))],
             )
 
+    def _migrate_v1(self) -> None:
+        """Version 1 -> 2 inside the open transaction: tables rebuilt with a ``run``
+        column (SQLite cannot change a UNIQUE constraint in place); every v1 row keeps
+        its values under run ``LEGACY_RUN``. Rows mixed by v1's run collisions cannot be
+        told apart any more and stay as they were."""
+        db = self._db
+        db.execute("DROP INDEX IF EXISTS records_by_role")
+        db.execute("ALTER TABLE records RENAME TO records_v1")
+        db.execute("ALTER TABLE rewards RENAME TO rewards_v1")
+        for statement in _statements(_TABLES):
+            db.execute(statement)
+        db.execute(
+            f"INSERT INTO records (run, {_V1_COLUMNS}) SELECT ?, {_V1_COLUMNS} FROM records_v1",
+            (LEGACY_RUN,),
+        )
+        db.execute(
+            "INSERT INTO rewards (run, uav, episode, round, reward, source) "
+            "SELECT ?, uav, episode, round, reward, source FROM rewards_v1",
+            (LEGACY_RUN,),
+        )
+        db.execute("DROP TABLE records_v1")
+        db.execute("DROP TABLE rewards_v1")
+        db.execute("UPDATE schema_version SET version = ?", (SCHEMA_VERSION,))
+        self.migrated_from = 1
+        log.warning(
+            "experience memory %s: migrated schema 1 -> %d (old rows kept under run %r)",
+            self.path,
+            SCHEMA_VERSION,
+            LEGACY_RUN,
+        )
+
     def _retokenise(self) -> None:
         rows = self._db.execute("SELECT seq, state_text FROM records").fetchall()
         self._db.executemany(
@@ -368,17 +495,17 @@ class ExperienceMemory:
         )
 
     def _recompute_returns(self) -> None:
-        rewards: dict[tuple[str, int], list[tuple[int, float]]] = {}
-        for uav, episode, rnd, reward in self._db.execute(
-            "SELECT uav, episode, round, reward FROM rewards"
+        rewards: dict[tuple[str, str, int], list[tuple[int, float]]] = {}
+        for run, uav, episode, rnd, reward in self._db.execute(
+            "SELECT run, uav, episode, round, reward FROM rewards"
         ):
-            rewards.setdefault((uav, episode), []).append((rnd, reward))
+            rewards.setdefault((run, uav, episode), []).append((rnd, reward))
         rows = self._db.execute(
-            "SELECT seq, uav, episode, round FROM records WHERE origin = ''"
+            "SELECT seq, run, uav, episode, round FROM records WHERE origin = ''"
         ).fetchall()
         self._db.executemany(
             "UPDATE records SET ret = ? WHERE seq = ?",
-            [(self._return_at(rewards.get((u, e), []), r), s) for s, u, e, r in rows],
+            [(self._return_at(rewards.get((n, u, e), []), r), s) for s, n, u, e, r in rows],
         )
 
     def _return_at(self, rewards: Iterable[tuple[int, float]], rnd: int) -> float | None:
@@ -392,6 +519,9 @@ class ExperienceMemory:
 
     @contextlib.contextmanager
     def _tx(self) -> Iterator[None]:
+        """One write transaction. IMMEDIATE takes the write lock up front, so a concurrent
+        writer waits on the busy timeout instead of failing half-way (WAL cannot upgrade
+        a read snapshot to a write without risking SQLITE_BUSY_SNAPSHOT)."""
         self._db.execute("BEGIN IMMEDIATE")
         try:
             yield
@@ -402,20 +532,29 @@ class ExperienceMemory:
             raise
         self._db.execute("COMMIT")
 
-    def _guard(self, what: str, default: T, fn: Callable[[], T]) -> T:
-        """Run a database operation; an environmental failure is logged, counted and
-        dropped (memory is advisory), a programming error still raises."""
+    def _guard(
+        self, what: str, default: T, fn: Callable[[], T], *, write: bool = True, own: bool = True
+    ) -> T:
+        """Run a database operation; a programming error raises. An environmental failure
+        of a write of our own experience raises ``MemoryUnavailable`` when the memory is
+        required; otherwise (reads, which are advisory, and peers' records, ``own=False``)
+        it is logged, counted and dropped."""
         try:
             return fn()
         except (sqlite3.ProgrammingError, sqlite3.IntegrityError, sqlite3.InterfaceError):
             raise
         except sqlite3.Error as exc:
-            self.write_errors += 1
+            if write:
+                self.write_errors += 1
+            if write and own and self.required:
+                raise MemoryUnavailable(
+                    f"experience memory {self.path}: {what} failed: {exc}", during="write"
+                ) from None
             now = time.monotonic()
             if now - self._last_error_log >= 5.0:
                 self._last_error_log = now
                 log.error(
-                    "experience memory: %s failed (%s); dropped (%d errors so far)",
+                    "experience memory: %s failed (%s); dropped (%d write errors so far)",
                     what,
                     exc,
                     self.write_errors,
@@ -426,12 +565,12 @@ class ExperienceMemory:
         group = self._groups.get((task, role))
         if group is None:
             group = _Group()
-            for seq, uav, episode, rnd, tokens, skill, ret, final in self._db.execute(
-                "SELECT seq, uav, episode, round, tokens, skill, ret, final FROM records "
+            for seq, run, uav, episode, rnd, tokens, skill, ret, final in self._db.execute(
+                "SELECT seq, run, uav, episode, round, tokens, skill, ret, final FROM records "
                 "WHERE task = ? AND role = ? ORDER BY seq",
                 (task, role),
             ):
-                group.add((uav, episode, rnd), seq, tokens.split(), skill, ret, bool(final))
+                group.add((run, uav, episode, rnd), seq, tokens.split(), skill, ret, bool(final))
             self._groups[(task, role)] = group
         return group
 
@@ -449,27 +588,30 @@ class ExperienceMemory:
         skill: str,
         invocation: str,
     ) -> bool:
-        """Store one decision; ``False`` if (uav, episode, round) was already stored.
+        """Store one decision of this run; ``False`` if (run, uav, episode, round) was
+        already stored. When it returns ``True`` the record is committed (acknowledged).
 
         Rewards already delivered for this or later rounds of the trajectory are folded
         into its return at once, so delivery order does not matter."""
         tokens = tokenise(state_text)
         skill = skill_of(skill)
+        run = self.run
 
-        def run() -> tuple[int, float | None, float | None] | None:
+        def go() -> tuple[int, float | None, float | None] | None:
             with self._tx():
                 rewards = self._db.execute(
                     "SELECT round, reward, source FROM rewards "
-                    "WHERE uav = ? AND episode = ? AND round >= ?",
-                    (uav, episode, round),
+                    "WHERE run = ? AND uav = ? AND episode = ? AND round >= ?",
+                    (run, uav, episode, round),
                 ).fetchall()
                 own = next(((r, s) for u, r, s in rewards if u == round), (None, ""))
                 ret = self._return_at(((u, r) for u, r, _ in rewards), round)
                 cur = self._db.execute(
-                    "INSERT OR IGNORE INTO records (task, role, uav, episode, round, state_text, "
-                    "tokens, skill, invocation, reward, ret, reward_source, created_at) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "INSERT OR IGNORE INTO records (run, task, role, uav, episode, round, "
+                    "state_text, tokens, skill, invocation, reward, ret, reward_source, "
+                    "created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (
+                        run,
                         task,
                         role,
                         uav,
@@ -490,19 +632,20 @@ class ExperienceMemory:
                 assert cur.lastrowid is not None
                 return cur.lastrowid, own[0], ret
 
-        done = self._guard("append", None, run)
+        done = self._guard("append", None, go)
         if done is None:
             return False
         group = self._groups.get((task, role))
         if group is not None:
-            group.add((uav, episode, round), done[0], tokens, skill, done[2], False)
+            group.add((run, uav, episode, round), done[0], tokens, skill, done[2], False)
         return True
 
     def add_reward(self, uav: str, episode: int, round: int, reward: float, source: str) -> bool:
-        """Store r_round unchanged and credit gamma^(round-t) * r to every G_t, t <= round,
-        of this trajectory. Idempotent: the same reward delivered again changes nothing; a
-        different value for the same round replaces the old one (returns are adjusted by
-        the difference). Returns whether anything changed."""
+        """Store r_round of this run unchanged and credit gamma^(round-t) * r to every
+        G_t, t <= round, of this run's trajectory (never another run's). Idempotent: the
+        same reward delivered again changes nothing; a different value for the same round
+        replaces the old one (returns are adjusted by the difference). Returns whether
+        anything changed."""
         if not math.isfinite(reward):
             log.warning(
                 "experience memory: non-finite reward %r for %s/%s/%s ignored",
@@ -512,33 +655,35 @@ class ExperienceMemory:
                 round,
             )
             return False
+        run = self.run
 
-        def run() -> list[tuple[str, str, Key, float]] | None:
+        def go() -> list[tuple[str, str, RunKey, float]] | None:
             with self._tx():
                 old = self._db.execute(
-                    "SELECT reward FROM rewards WHERE uav = ? AND episode = ? AND round = ?",
-                    (uav, episode, round),
+                    "SELECT reward FROM rewards "
+                    "WHERE run = ? AND uav = ? AND episode = ? AND round = ?",
+                    (run, uav, episode, round),
                 ).fetchone()
                 if old is not None and old[0] == reward:
                     return None
                 delta = reward - (old[0] if old is not None else 0.0)
                 self._db.execute(
-                    "INSERT OR REPLACE INTO rewards VALUES (?, ?, ?, ?, ?)",
-                    (uav, episode, round, reward, source),
+                    "INSERT OR REPLACE INTO rewards VALUES (?, ?, ?, ?, ?, ?)",
+                    (run, uav, episode, round, reward, source),
                 )
                 self._db.execute(
-                    "UPDATE records SET reward = ?, reward_source = ? "
-                    "WHERE uav = ? AND episode = ? AND round = ? AND origin = ''",
-                    (reward, source, uav, episode, round),
+                    "UPDATE records SET reward = ?, reward_source = ? WHERE run = ? AND uav = ? "
+                    "AND episode = ? AND round = ? AND origin = ''",
+                    (reward, source, run, uav, episode, round),
                 )
                 rows = self._db.execute(
                     "SELECT seq, task, role, round, ret FROM records "
-                    "WHERE uav = ? AND episode = ? AND round <= ? AND origin = ''",
-                    (uav, episode, round),
+                    "WHERE run = ? AND uav = ? AND episode = ? AND round <= ? AND origin = ''",
+                    (run, uav, episode, round),
                 ).fetchall()
                 g = self.gamma
                 updates = [
-                    (task, role, (uav, episode, t), (ret or 0.0) + g ** (round - t) * delta)
+                    (task, role, (run, uav, episode, t), (ret or 0.0) + g ** (round - t) * delta)
                     for _, task, role, t, ret in rows
                 ]
                 self._db.executemany(
@@ -547,73 +692,82 @@ class ExperienceMemory:
                 )
                 return updates
 
-        updates = self._guard("add_reward", None, run)
+        updates = self._guard("add_reward", None, go)
         if updates is None:
             return False
         for task, role, key, ret in updates:
             group = self._groups.get((task, role))
-            if group is not None:
-                group.ret[group.pos[key]] = ret
+            i = group.pos.get(key) if group is not None else None
+            if group is not None and i is not None:
+                group.ret[i] = ret
         return True
 
     def finalise(self, uav: str, episode: int) -> int:
-        """Mark the trajectory ended: its returns are complete. Returns records marked."""
+        """Mark this run's trajectory ended: its returns are complete. Returns records
+        marked."""
+        run = self.run
 
-        def run() -> list[tuple[str, str, int]]:
+        def go() -> list[tuple[str, str, int]]:
             with self._tx():
                 rows = self._db.execute(
                     "SELECT task, role, round FROM records "
-                    "WHERE uav = ? AND episode = ? AND final = 0 AND origin = ''",
-                    (uav, episode),
+                    "WHERE run = ? AND uav = ? AND episode = ? AND final = 0 AND origin = ''",
+                    (run, uav, episode),
                 ).fetchall()
                 self._db.execute(
-                    "UPDATE records SET final = 1 WHERE uav = ? AND episode = ? AND origin = ''",
-                    (uav, episode),
+                    "UPDATE records SET final = 1 "
+                    "WHERE run = ? AND uav = ? AND episode = ? AND origin = ''",
+                    (run, uav, episode),
                 )
                 return rows
 
         nothing: list[tuple[str, str, int]] = []
-        rows = self._guard("finalise", nothing, run)
+        rows = self._guard("finalise", nothing, go)
         for task, role, rnd in rows:
             group = self._groups.get((task, role))
-            if group is not None:
-                group.final[group.pos[(uav, episode, rnd)]] = 1
+            i = group.pos.get((run, uav, episode, rnd)) if group is not None else None
+            if group is not None and i is not None:
+                group.final[i] = 1
         return len(rows)
 
     def ingest(self, record: ExperienceRecord) -> bool:
-        """Merge a peer's record (shared swarm memory). New keys are inserted; a stored
-        peer record is replaced by a newer version (finalised beats in flight, then the
-        publisher's (epoch, seq)), never downgraded from final. Records this daemon
-        appended itself are authoritative and never overwritten, which also drops our
-        own echo. Malformed records (non-finite numbers, oversize text) are refused.
-        Returns whether anything changed."""
+        """Merge a peer's record (shared swarm memory), deduplicated by (run, uav,
+        episode, round). New keys are inserted; a stored peer record is replaced by a
+        newer version (finalised beats in flight, then the publisher's (epoch, seq)),
+        never downgraded from final. Records this daemon appended itself are
+        authoritative and never overwritten, which also drops our own echo. Malformed
+        records (non-finite numbers, oversize text) are refused. Returns whether
+        anything changed."""
         problem = _invalid(record)
         if problem is not None:
             log.debug("experience memory: refused record from %s: %s", record.h.sender, problem)
             return False
-        key: Key = (record.uav, record.episode, record.round)
+        key: RunKey = (record.run, record.uav, record.episode, record.round)
         skill = skill_of(record.skill)
         tokens = tokenise(record.state_text)
         version = (record.final, record.h.epoch, record.h.seq)
 
-        def run() -> tuple[int, str, str] | None:
+        def go() -> tuple[int, str, str] | None:
             """(seq, task, role) of the inserted or updated row, or None if unchanged."""
             with self._tx():
                 row = self._db.execute(
                     "SELECT seq, origin, final, src_epoch, src_seq, reward, ret, task, role "
-                    "FROM records WHERE uav = ? AND episode = ? AND round = ?",
+                    "FROM records WHERE run = ? AND uav = ? AND episode = ? AND round = ?",
                     key,
                 ).fetchone()
                 if row is None:
                     cur = self._db.execute(
-                        "INSERT INTO records (task, role, uav, episode, round, state_text, tokens, "
-                        "skill, invocation, reward, ret, final, origin, reward_source, src_epoch, "
-                        "src_seq, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, "
-                        "?, ?)",
+                        "INSERT INTO records (run, task, role, uav, episode, round, state_text, "
+                        "tokens, skill, invocation, reward, ret, final, origin, reward_source, "
+                        "src_epoch, src_seq, created_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, "
+                        "?, ?, ?, ?, ?, ?, ?, ?)",
                         (
+                            record.run,
                             record.task,
                             record.role,
-                            *key,
+                            record.uav,
+                            record.episode,
+                            record.round,
                             record.state_text,
                             " ".join(sorted(tokens)),
                             skill,
@@ -651,7 +805,7 @@ class ExperienceMemory:
                     return None  # a newer copy of the same content
                 return seq, task, role
 
-        done = self._guard("ingest", None, run)
+        done = self._guard("ingest", None, go, own=False)
         if done is None:
             return False
         group = self._groups.get((done[1], done[2]))
@@ -670,24 +824,30 @@ class ExperienceMemory:
         """Build the retrieval index of (task, role) now rather than on the first query
         (about 1.5 s at 10^5 records), e.g. right after the role is assigned, so the first
         decision after a restart is not the slow one. Returns the records indexed."""
-        group = self._guard("warm", None, lambda: self._group(task, role))
+        group = self._guard("warm", None, lambda: self._group(task, role), write=False)
         return 0 if group is None else len(group)
 
-    def get(self, uav: str, episode: int, round: int) -> StoredRecord | None:
+    def get(
+        self, uav: str, episode: int, round: int, *, run: str | None = None
+    ) -> StoredRecord | None:
+        """One record of ``run`` (default: this memory's own run)."""
         row = self._db.execute(
-            f"SELECT {_COLUMNS} FROM records WHERE uav = ? AND episode = ? AND round = ?",
-            (uav, episode, round),
+            f"SELECT {_COLUMNS} FROM records "
+            "WHERE run = ? AND uav = ? AND episode = ? AND round = ?",
+            (self.run if run is None else run, uav, episode, round),
         ).fetchone()
         return _stored(row) if row is not None else None
 
     def export(self, uav: str, episode: int, *, final_only: bool = True) -> list[StoredRecord]:
-        """This memory's own records of one trajectory, by round, for publishing."""
+        """This memory's own records of one trajectory of its run, by round, for
+        publishing."""
         sql = (
-            f"SELECT {_COLUMNS} FROM records WHERE uav = ? AND episode = ? AND origin = ''"
+            f"SELECT {_COLUMNS} FROM records "
+            "WHERE run = ? AND uav = ? AND episode = ? AND origin = ''"
             + (" AND final = 1" if final_only else "")
             + " ORDER BY round"
         )
-        return [_stored(r) for r in self._db.execute(sql, (uav, episode))]
+        return [_stored(r) for r in self._db.execute(sql, (self.run, uav, episode))]
 
     def export_final(self, uav: str, episode: int) -> list[StoredRecord]:
         return self.export(uav, episode, final_only=True)
@@ -787,7 +947,14 @@ class ExperienceMemory:
         group = self._group(task, role)
         pos, sim = self._select(group, tokenise(state_text))
         return [
-            Neighbour(group.keys[i], group.skills[group.skill[i]], group.ret[i], s, group.seq[i])
+            Neighbour(
+                group.keys[i][1:],
+                group.skills[group.skill[i]],
+                group.ret[i],
+                s,
+                group.seq[i],
+                group.keys[i][0],
+            )
             for i, s in zip(pos, sim, strict=True)
         ]
 
@@ -798,7 +965,7 @@ class ExperienceMemory:
         the neighbourhood's mean return; 0 for a skill the neighbourhood has not seen.
         Keys are the strings given (skill names or invocations; both map to the skill)."""
         names = list(skills)
-        group = self._guard("retrieval", None, lambda: self._group(task, role))
+        group = self._guard("retrieval", None, lambda: self._group(task, role), write=False)
         if group is None:
             return dict.fromkeys(names, 0.0)
         pos, _ = self._select(group, tokenise(state_text))
@@ -828,10 +995,53 @@ class ExperienceMemory:
 
 
 def _stored(row: tuple[Any, ...]) -> StoredRecord:
-    seq, task, role, uav, episode, rnd, text, skill, inv, reward, ret, final, origin, src = row
+    seq, task, role, uav, episode, rnd, text, skill, inv, reward, ret, final, origin, src, run = row
     return StoredRecord(
-        seq, task, role, uav, episode, rnd, text, skill, inv, reward, ret, bool(final), origin, src
+        seq,
+        task,
+        role,
+        uav,
+        episode,
+        rnd,
+        text,
+        skill,
+        inv,
+        reward,
+        ret,
+        bool(final),
+        origin,
+        src,
+        run,
     )
+
+
+class _NewerSchema(Exception):
+    """The file belongs to a newer release: refuse it, never rewrite or set it aside."""
+
+
+def _statements(script: str) -> list[str]:
+    """Split a DDL script into statements (``executescript`` would commit on its own,
+    outside our transaction). Comments may hold ';': SQLite decides where one ends."""
+    out: list[str] = []
+    current = ""
+    for line in script.splitlines(keepends=True):
+        current += line
+        if sqlite3.complete_statement(current):
+            out.append(current.strip())
+            current = ""
+    return out
+
+
+def _transient(exc: sqlite3.Error) -> bool:
+    text = str(exc).lower()
+    return "locked" in text or "busy" in text or "unable to open" in text
+
+
+def _why(exc: BaseException) -> str:
+    """One line for an environmental failure, with the errno text when there is one."""
+    if isinstance(exc, OSError):
+        return f"{exc.strerror or type(exc).__name__}: {exc.filename or ''}".rstrip(": ")
+    return f"{type(exc).__name__}: {exc}"
 
 
 def _invalid(record: ExperienceRecord) -> str | None:
@@ -866,6 +1076,8 @@ class AsyncExperienceMemory:
         neighbourhood: int = 32,
         finalised_only: bool = False,
         durable: bool = False,
+        run: str | None = None,
+        required: bool = False,
     ) -> AsyncExperienceMemory:
         executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="aw-memory")
         loop = asyncio.get_running_loop()
@@ -878,6 +1090,8 @@ class AsyncExperienceMemory:
                     neighbourhood=neighbourhood,
                     finalised_only=finalised_only,
                     durable=durable,
+                    run=run,
+                    required=required,
                 ),
             )
         except BaseException:
@@ -886,8 +1100,20 @@ class AsyncExperienceMemory:
         return cls(executor, memory)
 
     @classmethod
-    async def from_config(cls, cfg: AgentConfig) -> AsyncExperienceMemory:
-        return await cls.open(cfg.memory_path, gamma=cfg.gamma, neighbourhood=cfg.neighbourhood)
+    async def from_config(
+        cls, cfg: AgentConfig, *, run: str | None = None
+    ) -> AsyncExperienceMemory:
+        return await cls.open(
+            cfg.memory_path,
+            gamma=cfg.gamma,
+            neighbourhood=cfg.neighbourhood,
+            run=run or cfg.run_id,
+            required=cfg.memory_required,
+        )
+
+    @property
+    def run(self) -> str:
+        return self._mem.run
 
     @property
     def sync(self) -> ExperienceMemory:
@@ -939,8 +1165,10 @@ class AsyncExperienceMemory:
     async def warm(self, task: str, role: str) -> int:
         return await self._run(lambda: self._mem.warm(task, role))
 
-    async def get(self, uav: str, episode: int, round: int) -> StoredRecord | None:
-        return await self._run(lambda: self._mem.get(uav, episode, round))
+    async def get(
+        self, uav: str, episode: int, round: int, *, run: str | None = None
+    ) -> StoredRecord | None:
+        return await self._run(lambda: self._mem.get(uav, episode, round, run=run))
 
     async def export(
         self, uav: str, episode: int, *, final_only: bool = True

@@ -19,10 +19,12 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
+from urllib.parse import urlsplit, urlunsplit
 
 import httpx
 
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.redact import redact_url, scrub, url_secrets
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +40,7 @@ class LLMError(Exception):
     def __init__(self, message: str, endpoint: str = "") -> None:
         super().__init__(message)
         self.endpoint = endpoint
+        self.attempts = 0  # requests this call sent before it failed
 
 
 class LLMTimeout(LLMError):
@@ -75,10 +78,8 @@ def _excerpt(text: str, limit: int = _EXCERPT) -> str:
 
 
 def _endpoint_name(base_url: str) -> str:
-    """The URL without credentials or query, safe to print in errors and logs."""
-    url = httpx.URL(base_url)
-    port = f":{url.port}" if url.port else ""
-    return f"{url.scheme}://{url.host}{port}{url.path}".rstrip("/")
+    """The URL with credentials masked, safe to print in errors and logs."""
+    return redact_url(base_url).rstrip("/")
 
 
 # --------------------------------------------------------------------------- usage
@@ -346,6 +347,14 @@ class ChatClient:
     ) -> None:
         self.base_url = base_url.rstrip("/")
         self.endpoint = _endpoint_name(self.base_url)
+        self._secrets = url_secrets(self.base_url)
+        # A query in the base URL (``?api-version=...``, a proxy's ``?api_key=...``) goes on
+        # every request as parameters: httpx would glue the request path after it.
+        parts = urlsplit(self.base_url)
+        self._query = httpx.QueryParams(parts.query)
+        http_base = urlunsplit((parts.scheme, parts.netloc, parts.path, "", ""))
+        self._http_base = http_base
+        self.requests_sent = 0  # HTTP requests to /chat/completions, answered or not
         self.model = model
         self.extra_body = dict(extra_body or {})
         self.deadline_s = deadline_s
@@ -366,8 +375,9 @@ class ChatClient:
                     self.endpoint,
                 )
             headers["Authorization"] = f"Bearer {key}"
+            self._secrets.append(key)
         self._http = httpx.AsyncClient(
-            base_url=self.base_url,
+            base_url=http_base,
             headers=headers,
             timeout=self._timeout(deadline_s),
             transport=transport,
@@ -449,6 +459,7 @@ class ChatClient:
             return result
         except LLMError as exc:
             verdict = True
+            attempts = exc.attempts
             if isinstance(exc, LLMHTTPError) and exc.status != 429 and exc.status < 500:
                 self.breaker.success()  # the endpoint is alive; the request was wrong
             else:
@@ -469,7 +480,11 @@ class ChatClient:
                     attempts += 1
                     try:
                         raw = await self._post_once(body, deadline)
+                    except LLMError as exc:
+                        exc.attempts = attempts
+                        raise
                     except _Retryable as retry:
+                        retry.error.attempts = attempts
                         if attempts > self.retries:
                             raise retry.error from None
                         delay = self._rng.uniform(
@@ -489,35 +504,47 @@ class ChatClient:
                         raw, usage, latency, attempts, self.endpoint, self.model
                     ), attempts
         except TimeoutError:
-            raise LLMTimeout(
+            timeout = LLMTimeout(
                 f"no answer from {self.endpoint} within the {deadline:g} s deadline "
                 f"(attempt {attempts} of {self.retries + 1})",
                 self.endpoint,
-            ) from None
+            )
+            timeout.attempts = attempts
+            raise timeout from None
+
+    def _scrub(self, text: str) -> str:
+        return scrub(text, self._secrets)
 
     async def _post_once(self, body: dict[str, Any], deadline: float) -> dict[str, Any]:
+        self.requests_sent += 1
         try:
             response = await self._http.post(
-                "/chat/completions", json=body, timeout=self._timeout(deadline)
+                "/chat/completions",
+                json=body,
+                params=self._query or None,
+                timeout=self._timeout(deadline),
             )
         except (httpx.ConnectError, httpx.ConnectTimeout) as exc:
             raise _Retryable(
                 LLMUnreachable(
-                    f"cannot connect to {self.endpoint}: {type(exc).__name__}: {exc}",
+                    f"cannot connect to {self.endpoint}: "
+                    f"{type(exc).__name__}: {self._scrub(str(exc))}",
                     self.endpoint,
                 )
             ) from None
         except httpx.TransportError as exc:  # reset mid-answer, protocol error, read timeout
             raise LLMBadResponse(
-                f"transport error talking to {self.endpoint}: {type(exc).__name__}: {exc}",
+                f"transport error talking to {self.endpoint}: "
+                f"{type(exc).__name__}: {self._scrub(str(exc))}",
                 self.endpoint,
             ) from None
         if response.status_code >= 300:
+            text = self._scrub(_excerpt(response.text))
             err = LLMHTTPError(
-                f"HTTP {response.status_code} from {self.endpoint}: {_excerpt(response.text)}",
+                f"HTTP {response.status_code} from {self.endpoint}: {text}",
                 self.endpoint,
                 response.status_code,
-                _excerpt(response.text),
+                text,
             )
             if response.status_code == 429 or response.status_code >= 500:
                 raise _Retryable(err, _retry_after(response))
@@ -526,13 +553,15 @@ class ChatClient:
             raw = response.json()
         except ValueError:
             raise LLMBadResponse(
-                f"non-JSON answer from {self.endpoint}: {_excerpt(response.text, 120)}",
+                f"non-JSON answer from {self.endpoint}: "
+                f"{self._scrub(_excerpt(response.text, 120))}",
                 self.endpoint,
             ) from None
         choices = raw.get("choices") if isinstance(raw, dict) else None
         if not isinstance(choices, list) or not choices or not isinstance(choices[0], dict):
             raise LLMBadResponse(
-                f"answer from {self.endpoint} has no choices: {_excerpt(response.text, 120)}",
+                f"answer from {self.endpoint} has no choices: "
+                f"{self._scrub(_excerpt(response.text, 120))}",
                 self.endpoint,
             )
         out: dict[str, Any] = raw
@@ -565,7 +594,8 @@ class ChatClient:
     @property
     def server_root(self) -> str:
         """The server URL without a trailing ``/v1`` (llama-server's extra endpoints live there)."""
-        return self.base_url[:-3] if self.base_url.endswith("/v1") else self.base_url
+        base = self._http_base
+        return base[:-3] if base.endswith("/v1") else base
 
     async def tokenize(self, text: str) -> list[int] | None:
         """Token ids of ``text`` via llama-server's ``/tokenize``; ``None`` when the endpoint
@@ -577,7 +607,9 @@ class ChatClient:
         url = f"{self.server_root}/tokenize"
         try:
             async with asyncio.timeout(self.deadline_s):
-                response = await self._http.post(url, json={"content": text, "add_special": False})
+                response = await self._http.post(
+                    url, json={"content": text, "add_special": False}, params=self._query or None
+                )
         except TimeoutError:
             raise LLMTimeout(f"/tokenize at {self.endpoint} timed out", self.endpoint) from None
         except httpx.TransportError as exc:

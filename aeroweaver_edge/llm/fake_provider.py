@@ -73,6 +73,12 @@ class Policy:
     delay_s: float = 0.0  # wait before answering
     tokenizer: Tokenizer = "single"  # /tokenize: letters are one token, two, or 404
     bad_json: bool = False  # 200 with a body that is not JSON
+    error_message: str | None = None  # message of the ``status`` error body
+    api_key: str | None = None  # 401 unless "Authorization: Bearer <api_key>"
+    models: tuple[str, ...] | None = None  # 404 "model does not exist" for any other model
+    model_error_status: int = 404  # 400 for providers that say "Model Not Exist" with 400
+    max_prompt_chars: int | None = None  # 400 "maximum context length" beyond this
+    echo_target: bool = False  # error bodies echo the request target (query included)
 
 
 QUIRKS: dict[str, Policy] = {
@@ -94,6 +100,12 @@ QUIRKS: dict[str, Policy] = {
     "rate_limited": Policy(status=429, retry_after=0.0),
     "server_error": Policy(status=503),
     "hang": Policy(hang=True),
+    "unauthorized": Policy(api_key="sk-right-key"),
+    "forbidden": Policy(status=403, error_message="Your organisation has no access to this model"),
+    "wrong_model": Policy(models=("fake-model",)),
+    "wrong_model_400": Policy(models=("fake-model",), model_error_status=400),
+    "context_length": Policy(max_prompt_chars=200),
+    "echo_target": Policy(status=404, echo_target=True),
     "drip": Policy(drip_s=0.2),
     "bad_json": Policy(bad_json=True),
 }
@@ -114,7 +126,8 @@ class _Answer:
     headers: dict[str, str] = field(default_factory=dict)
 
 
-_REASONS = {200: "OK", 400: "Bad Request", 404: "Not Found", 405: "Method Not Allowed",
+_REASONS = {200: "OK", 400: "Bad Request", 401: "Unauthorized", 403: "Forbidden",
+            404: "Not Found", 405: "Method Not Allowed",
             411: "Length Required", 429: "Too Many Requests", 500: "Internal Server Error",
             502: "Bad Gateway", 503: "Service Unavailable"}  # fmt: skip
 
@@ -272,7 +285,7 @@ class FakeProvider:
                 return False
             if policy.delay_s:
                 await asyncio.sleep(policy.delay_s)
-            answer = self._chat(policy, body)
+            answer = self._gate(policy, headers, target, body) or self._chat(policy, body)
             await self._send(writer, answer, keep, drip_s=policy.drip_s)
         else:
             await self._send(writer, self._route(method, path, policy, body), keep)
@@ -326,6 +339,27 @@ class FakeProvider:
             return _json(200, {"tokens": _tokenize(str(text), split=policy.tokenizer == "split")})
         return _error(404, f"no route {method} {path}")
 
+    def _gate(
+        self, policy: Policy, headers: dict[str, str], target: str, body: Any
+    ) -> _Answer | None:
+        """What a provider checks before it looks at the request: key, then model."""
+        key = headers.get("authorization", "")
+        if policy.api_key is not None and key != f"Bearer {policy.api_key}":
+            self.chat_calls += 1
+            return _error(401, "Incorrect API key provided", "authentication_error")
+        model = body.get("model") if isinstance(body, dict) else None
+        if policy.models is not None and model not in policy.models:
+            self.chat_calls += 1
+            if policy.model_error_status == 400:
+                return _error(400, "Model Not Exist")
+            return _error(
+                404, f"The model `{model}` does not exist or you do not have access to it."
+            )
+        if policy.echo_target and policy.status is not None:
+            self.chat_calls += 1
+            return _error(policy.status, f"no route for POST {target}")
+        return None
+
     def _chat(self, policy: Policy, body: Any) -> _Answer:
         self.chat_calls += 1
         if not isinstance(body, dict) or not isinstance(body.get("messages"), list):
@@ -335,11 +369,17 @@ class FakeProvider:
         ):
             self._errors_served += 1
             extra = {} if policy.retry_after is None else {"Retry-After": f"{policy.retry_after:g}"}
-            return _json(
-                policy.status,
-                {"error": {"message": f"scripted HTTP {policy.status}", "code": policy.status}},
-                extra,
-            )
+            text = policy.error_message or f"scripted HTTP {policy.status}"
+            return _json(policy.status, {"error": {"message": text, "code": policy.status}}, extra)
+        if policy.max_prompt_chars is not None:
+            chars = len(_prompt_text(body["messages"]))
+            if chars > policy.max_prompt_chars:
+                return _error(
+                    400,
+                    f"This model's maximum context length is {policy.max_prompt_chars // 4} "
+                    f"tokens. However, your messages resulted in {chars // 4} tokens.",
+                    "context_length_exceeded",
+                )
         wants_logprobs = bool(body.get("logprobs"))
         if policy.reject_logprobs and (wants_logprobs or "top_logprobs" in body):
             return _json(

@@ -1,16 +1,25 @@
 """Start-up endpoint probe: can this endpoint's first-token logprobs drive the selector?
 
-One 1-token request with logprobs, classified as
+One 1-token request with logprobs, classified by what the endpoint says. A verdict on
+logprobs (the selector acts on it for the rest of the run):
 
 * ``ok`` — a real distribution with enough mass on the labels: experience correction on;
-* ``rejected`` — the endpoint refuses logprobs (HTTP 400/422) or silently drops them;
+* ``rejected`` — the endpoint refuses logprobs (a 400/422 that goes away when the same
+  request is sent again without logprob parameters) or silently drops them;
 * ``degenerate`` — only 0 / -9999 values or an empty top list (an argmax, not a distribution);
-* ``low_label_mass`` — labels get too little of the mass (e.g. a base model);
-* ``unreachable`` — no answer at all (connection, deadline, 5xx, auth, breaker).
+* ``low_label_mass`` — labels get too little of the mass (e.g. a base model).
 
-Anything but ``ok`` means the selector falls back to the generated text label with the
-correction off; ``unreachable`` is "unknown", which the selector re-decides from its first
-real answer (an endpoint that is down at start-up should not lose the correction forever).
+No verdict, the endpoint is unusable as configured (each names its fix):
+
+* ``auth`` (401/403), ``not_found`` (404: wrong base URL or model), ``bad_request`` (a
+  400/422 that stays without logprobs: context length, a model the provider rejects),
+  ``unreachable`` (refused, DNS, breaker), ``timeout`` (no answer within the deadline),
+  ``server_error`` (429/5xx after retries), ``bad_response`` (2xx but not a completion).
+
+The verdicts other than ``ok`` mean the selector picks by the generated text label with
+the correction off. Without a verdict the selector decides from its first real answer (an
+endpoint that is down at start-up should not lose the correction forever); until then
+its rounds hold. ``aeroweaver probe`` exits with ``EXIT_STATUS[kind]``.
 """
 
 from __future__ import annotations
@@ -20,7 +29,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
-from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
+from aeroweaver_edge.llm.client import (
+    CallTag,
+    ChatClient,
+    LLMBadResponse,
+    LLMError,
+    LLMHTTPError,
+    LLMTimeout,
+)
 from aeroweaver_edge.llm.logprobs import (
     first_row,
     fold_labels,
@@ -29,7 +45,46 @@ from aeroweaver_edge.llm.logprobs import (
     text_of,
 )
 
-ProbeKind = Literal["ok", "rejected", "degenerate", "low_label_mass", "unreachable"]
+ProbeKind = Literal[
+    "ok",
+    "rejected",
+    "degenerate",
+    "low_label_mass",
+    "auth",
+    "not_found",
+    "bad_request",
+    "unreachable",
+    "timeout",
+    "server_error",
+    "bad_response",
+]
+VERDICTS: frozenset[str] = frozenset({"ok", "rejected", "degenerate", "low_label_mass"})
+"""Kinds that say what the endpoint's logprobs are; the rest say it did not answer."""
+
+EXIT_STATUS: dict[str, int] = {
+    "ok": 0,
+    "rejected": 3,  # usable, correction off (text label)
+    "degenerate": 3,
+    "low_label_mass": 3,
+    "auth": 4,
+    "not_found": 5,
+    "unreachable": 6,
+    "timeout": 7,
+    "bad_request": 8,
+    "server_error": 8,
+    "bad_response": 8,
+}
+"""``aeroweaver probe`` exit status per kind (1 and 2 stay internal and usage errors)."""
+
+_FIX: dict[str, str] = {
+    "auth": "check the key in the variable named by --api-key-env / llm.api_key_env",
+    "not_found": "check the base URL (usually ends in /v1) and the model name",
+    "bad_request": "the endpoint refuses the request itself (see its message)",
+    "unreachable": "check the host, port and that the server runs",
+    "timeout": "the endpoint is too slow or stuck; raise --llm-deadline or check the server",
+    "server_error": "the endpoint is failing or rate-limiting; try again later",
+    "bad_response": "the URL does not serve OpenAI chat completions",
+}
 
 PROBE_LABELS = tuple("ABCDEFGH")
 MIN_LABEL_MASS = 0.3
@@ -73,15 +128,31 @@ class ProbeResult:
     def correction_on(self) -> bool:
         return self.kind == "ok"
 
+    @property
+    def verdict(self) -> bool:
+        """Whether this says what the logprobs are (else: the endpoint did not answer)."""
+        return self.kind in VERDICTS
+
+    @property
+    def exit_status(self) -> int:
+        return EXIT_STATUS[self.kind]
+
     def line(self) -> str:
         """A printable one-liner for start-up logs and the run banner."""
         where = f"{self.model} @ {self.endpoint}" if self.endpoint else self.model or "endpoint"
-        head = f"LLM probe [{self.kind}] {where}: label mass {self.label_mass:.2f}"
-        tail = (
-            "logprob selection with experience correction ON"
-            if self.ok
-            else "correction OFF, selecting by the generated text label"
-        )
+        if self.verdict:
+            head = f"LLM probe [{self.kind}] {where}: label mass {self.label_mass:.2f}"
+            tail = (
+                "logprob selection with experience correction ON"
+                if self.ok
+                else "correction OFF, selecting by the generated text label"
+            )
+        else:
+            head = f"LLM probe [{self.kind}] {where}"
+            tail = (
+                f"{_FIX[self.kind]}; no verdict on logprobs yet: the first answer decides "
+                "the correction, rounds hold until the endpoint answers"
+            )
         detail = f"; {self.detail}" if self.detail else ""
         return f"{head}{detail}; {tail}"
 
@@ -122,11 +193,47 @@ def classify_response(
     return ProbeResult("ok", mass, f"{len(row.tops)} top entries, finish {finish}", endpoint, model)
 
 
+def error_kind(exc: LLMError) -> ProbeKind:
+    """What a failed request says about the endpoint (never "rejected": only a retry
+    without logprob parameters can tell that a 400/422 was about them)."""
+    if isinstance(exc, LLMHTTPError):
+        if exc.status in (401, 403):
+            return "auth"
+        if exc.status == 404:
+            return "not_found"
+        if exc.status in (408, 429) or exc.status >= 500:
+            return "server_error"
+        return "bad_request"
+    if isinstance(exc, LLMTimeout):
+        return "timeout"
+    if isinstance(exc, LLMBadResponse):
+        return "bad_response"
+    return "unreachable"  # LLMUnreachable, LLMBreakerOpen, LLMConfigError
+
+
 def classify_error(exc: LLMError, *, model: str = "") -> ProbeResult:
-    """A failed request: 400/422 means logprobs were refused; anything else is unreachable."""
-    if isinstance(exc, LLMHTTPError) and exc.status in (400, 422):
-        return ProbeResult("rejected", 0.0, f"HTTP {exc.status}: {exc.body}", exc.endpoint, model)
-    return ProbeResult("unreachable", 0.0, f"{type(exc).__name__}: {exc}", exc.endpoint, model)
+    """A failed request, classified by what the endpoint said."""
+    kind = error_kind(exc)
+    detail = f"HTTP {exc.status}: {exc.body}" if isinstance(exc, LLMHTTPError) else str(exc)
+    if not isinstance(exc, LLMHTTPError):
+        detail = f"{type(exc).__name__}: {detail}"
+    return ProbeResult(kind, 0.0, detail, exc.endpoint, model)
+
+
+def refused_logprobs(exc: LLMError) -> ProbeResult:
+    """A 400/422 with logprob parameters that a retry without them answered."""
+    assert isinstance(exc, LLMHTTPError)
+    return ProbeResult(
+        "rejected",
+        0.0,
+        f"HTTP {exc.status} with logprob parameters, answered without them: {exc.body}",
+        exc.endpoint,
+    )
+
+
+def may_be_logprobs(exc: LLMError) -> bool:
+    """A refusal that could be about the logprob parameters (to be told by a retry)."""
+    return isinstance(exc, LLMHTTPError) and exc.status in (400, 422)
 
 
 async def single_token_letters(client: ChatClient) -> tuple[str, ...] | None:
@@ -159,7 +266,17 @@ async def probe_endpoint(
             top_logprobs=top_logprobs,
         )
     except LLMError as exc:
-        return classify_error(exc, model=client.model)
+        if not may_be_logprobs(exc):
+            return classify_error(exc, model=client.model)
+        try:  # the same request without logprob parameters tells what was refused
+            await client.chat(
+                probe_messages(), tag=CallTag(purpose="probe"), max_tokens=1, temperature=0
+            )
+        except LLMError as again:
+            # Refused without logprobs too: the request itself is the problem (context
+            # length, a model the provider does not serve), not logprob support.
+            return classify_error(again if not may_be_logprobs(again) else exc, model=client.model)
+        return replace(refused_logprobs(exc), model=client.model)
     probe = classify_response(
         result.raw, PROBE_LABELS, min_label_mass, endpoint=client.endpoint, model=client.model
     )

@@ -37,6 +37,7 @@ class DaemonSet:
         self.workdir = workdir
         self.tasks: dict[str, asyncio.Task[Any]] = {}
         self.procs: dict[str, asyncio.subprocess.Process] = {}
+        self.killed: set[str] = set()  # by fault injection: lost on purpose, not failed
 
     async def start(self) -> None:
         if not self.processes:
@@ -77,6 +78,7 @@ class DaemonSet:
 
     async def kill(self, uav: str) -> None:
         """Fault injection: the daemon dies abruptly (process SIGKILL, or task cancelled)."""
+        self.killed.add(uav)
         if uav in self.procs:
             self.procs[uav].kill()
             await self.procs[uav].wait()
@@ -89,10 +91,10 @@ class DaemonSet:
         """Daemons that ended before the run did, with the reason."""
         out: dict[str, str] = {}
         for uav, t in self.tasks.items():
-            if t.done() and not t.cancelled() and t.exception() is not None:
-                out[uav] = repr(t.exception())
+            if uav not in self.killed and t.done() and not t.cancelled() and t.exception():
+                out[uav] = f"{type(t.exception()).__name__}: {t.exception()}"
         for uav, p in self.procs.items():
-            if p.returncode not in (None, 0):
+            if uav not in self.killed and p.returncode not in (None, 0):
                 tail = (self.workdir / f"{uav}.log").read_text(errors="replace")[-2000:]
                 out[uav] = f"exit {p.returncode}: {tail}"
         return out

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import AsyncIterator
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from aeroweaver_edge.config import LLMConfig
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.llm.probe import ProbeResult
 
 Source = Literal["scripted", "endpoint", "embedded"]
 
@@ -38,13 +41,13 @@ async def shared_llm(llm: LLMConfig, *, needed: bool) -> AsyncIterator[tuple[LLM
         )
 
 
-async def probe(llm: LLMConfig) -> str:
-    """The endpoint probe's one-line verdict."""
+async def probe(llm: LLMConfig) -> ProbeResult:
+    """The endpoint probe's verdict (``line()`` is the one-line form)."""
     from aeroweaver_edge.llm.client import ChatClient
     from aeroweaver_edge.llm.probe import probe_endpoint
 
     async with ChatClient.from_config(llm) as client:
-        return (await probe_endpoint(client)).summary()
+        return await probe_endpoint(client)
 
 
 __all__ = ["HONESTY_NOTE", "Source", "probe", "shared_llm"]

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import math
 import socket
 import tempfile
@@ -25,12 +24,16 @@ from pathlib import Path
 from typing import Any, Literal
 
 from aeroweaver_edge import defaults as d
+from aeroweaver_edge.agent.memory import new_run_id
 from aeroweaver_edge.config import AgentConfig, LLMConfig, MeshConfig, SimConfig, UavConfig
+from aeroweaver_edge.errors import RunFailed
+from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.sim.episode import EpisodeResult
+from aeroweaver_edge.orchestration.run_health import health_fields
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.tasks import create
 from aeroweaver_edge.tasks.base import TaskDefinition
@@ -73,11 +76,16 @@ class RunSummary:
     deliveries: int = 0
     decode_errors: int = 0
     holds: int = 0
-    deadline_misses: int = 0
+    holds_by_cause: dict[str, int] = field(default_factory=dict)
+    deadline_misses: int = 0  # daemon side + world side (deadline_misses_by_side)
+    deadline_misses_by_side: dict[str, int] = field(default_factory=dict)
     lost_uavs: dict[str, list[int]] = field(default_factory=dict)
     wall_s: float = 0.0
     model: str | None = None
     probe: str | None = None
+    probe_kind: str | None = None  # the start-up probe's class
+    llm_classes: dict[str, int] = field(default_factory=dict)  # UAVs per final class
+    run_id: str = ""  # stamped on every experience record of this run
     tokens: dict[str, int] = field(default_factory=dict)
     setup_tokens: int = 0
     llm_calls: int = 0
@@ -117,7 +125,9 @@ class RunSummary:
             "deliveries": self.deliveries,
             "decode_errors": self.decode_errors,
             "holds": self.holds,
+            "holds_by_cause": self.holds_by_cause,
             "deadline_misses": self.deadline_misses,
+            "deadline_misses_by_side": self.deadline_misses_by_side,
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
             "tokens_by_agent": self.tokens_by_agent,
@@ -129,13 +139,17 @@ class RunSummary:
             "setup_tokens": self.setup_tokens,
             "mission": self.mission,
             "llm_calls": self.llm_calls,
+            "llm_classes": self.llm_classes,
+            "run_id": self.run_id,
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
         }
 
 
-def _mean(xs: list[float]) -> float:
-    return math.fsum(xs) / len(xs) if xs else math.nan
+def _mean(xs: list[float]) -> float | None:
+    """Mean, or ``None`` (JSON null) when there is nothing to average: never NaN."""
+    finite = [x for x in xs if math.isfinite(x)]
+    return math.fsum(finite) / len(finite) if finite and len(finite) == len(xs) else None
 
 
 def percentiles(xs: Iterable[float]) -> dict[str, float]:
@@ -235,10 +249,12 @@ async def run_swarm(
             setup_tokens=plan.setup_tokens,
             mission=plan.as_dict(),
             note=HONESTY_NOTE[source],
+            run_id=new_run_id(),  # one per run: its records never collide with another run's
         )
         if opts.selector == "llm":
             summary.model = llm.model
-            summary.probe = await probe(llm)
+            verdict = await probe(llm)
+            summary.probe, summary.probe_kind = verdict.line(), verdict.kind
             summary.selector = f"llm:{llm.model}"
         else:
             summary.selector = "scripted:reference"
@@ -290,6 +306,7 @@ async def run_swarm(
                     beta=opts.beta,
                     gamma=opts.gamma,
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
+                    run_id=summary.run_id,
                     share_experience=opts.share_experience,
                 ),
             )
@@ -303,12 +320,12 @@ async def run_swarm(
         wait_s = (20.0 + 3.0 * len(uavs)) if opts.processes else (30.0 + 0.5 * len(uavs))
         missing = await runner.wait_alive(uavs, wait_s)
         if missing:
-            raise RuntimeError(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
+            raise RunFailed(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
         commander.publish(plan)
         board_ref["board"] = commander.board
         missing = await commander.wait_ready(plan.participants, wait_s)
         if missing:
-            raise RuntimeError(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
+            raise RunFailed(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
 
         try:
             for ep in range(opts.episodes):
@@ -326,13 +343,26 @@ async def run_swarm(
             summary.peak_rss_kb = daemons.peak_rss_kb()
         runner.shutdown()
         await daemons.stop()
+        failed = daemons.failed()
+        if failed:
+            raise RunFailed(
+                f"{len(failed)} daemon(s) stopped during the run: "
+                + "; ".join(f"{u}: {_last_line(why)}" for u, why in sorted(failed.items()))
+            )
         await asyncio.sleep(0.2)  # last reports
 
         board = commander.board
         summary.messages_sent = sum(p.messages_sent for p in board.uavs.values())
         summary.messages_dropped = sum(p.messages_dropped for p in board.uavs.values())
         summary.holds = sum(p.holds for p in board.uavs.values())
-        summary.deadline_misses = runner.stats.deadline_misses
+        health = health_fields(
+            board, runner.stats.deadline_misses, summary.probe, summary.probe_kind
+        )
+        summary.holds_by_cause = health["holds_by_cause"]
+        summary.deadline_misses_by_side = health["deadline_misses_by_side"]
+        summary.deadline_misses = summary.deadline_misses_by_side["total"]
+        summary.llm_classes = health["llm_classes"]
+        summary.probe = health["probe"]
         summary.decode_errors = (
             world_mesh.codec.stats.total
             + cmdr_mesh.codec.stats.total
@@ -342,7 +372,7 @@ async def run_swarm(
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
         summary.tokens = {"prompt": prompt, "completion": completion, "total": prompt + completion}
-        summary.llm_calls = sum(p.llm_calls for p in board.uavs.values())
+        summary.llm_calls = health["llm_calls"]
         for e in summary.episodes:
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
         summary.tokens_by_agent = {
@@ -362,8 +392,13 @@ async def run_swarm(
 
 
 def write_json(summary: RunSummary, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(summary.as_dict(), indent=2, default=str) + "\n", encoding="utf-8")
+    """Strict JSON (never NaN), written atomically: a reader never sees half a file."""
+    write_json_file(path, summary.as_dict())
+
+
+def _last_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else text
 
 
 __all__ = ["RunSummary", "SwarmOptions", "percentiles", "run_swarm", "world_task", "write_json"]

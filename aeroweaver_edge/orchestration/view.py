@@ -8,6 +8,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from aeroweaver_edge.hold_reasons import format_counts
 from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.sim.runner import RoundLog
 from commander.progress import ProgressBoard
@@ -33,7 +34,8 @@ class LiveView:
                 and last is not None
                 and (last.episode, last.round) == (log.episode, log.round)
             ):
-                what = ("HOLD " if last.held else "") + last.invocation
+                held = f"HOLD[{last.hold_cause or '?'}] " if last.held else ""
+                what = held + last.invocation
             tokens = rep.prompt_tokens + rep.completion_tokens if rep else 0
             role = f"[{rep.role}] " if rep and rep.role else ""
             tok = f" tok={tokens}" if tokens else ""
@@ -63,6 +65,10 @@ def print_mission(mission: dict[str, Any], console: Console) -> None:
         console.print(f"  · {escape(note)}")
 
 
+def _num(value: object) -> str:
+    return f"{value:.3f}" if isinstance(value, int | float) else "n/a"
+
+
 def print_summary(summary: dict[str, Any], console: Console | None = None) -> None:
     console = console or Console()
     if summary.get("mission"):
@@ -80,13 +86,13 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
             str(ep["episode"]),
             str(ep["rounds"]),
             ep["reason"],
-            f"{ep['team_return']:.3f}",
-            *(f"{ep['agent_returns'][u]:.3f}" for u in summary["agent_returns"]),
+            _num(ep["team_return"]),
+            *(_num(ep["agent_returns"].get(u)) for u in summary["agent_returns"]),
         )
     console.print(t)
     tok = summary.get("tokens") or {}
     console.print(
-        f"team mean return {s['team_return']:.3f} over {len(s['episodes'])} episode(s); "
+        f"team mean return {_num(s['team_return'])} over {len(s['episodes'])} episode(s); "
         f"rounds {s['rounds']}; messages sent {s['messages_sent']}, "
         f"dropped {s['messages_dropped']}; decode errors {s['decode_errors']}; "
         f"holds {s['holds']}; deadline misses {s['deadline_misses']}; wall {s['wall_s']:.2f} s"
@@ -94,6 +100,14 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
     if s.get("scripted_returns"):
         theirs = ", ".join(f"{b} {r:.3f}" for b, r in s["scripted_returns"].items())
         console.print(f"flown by the world (not in the team mean): {theirs}")
+    if s.get("holds"):
+        console.print(f"holds by cause: {format_counts(s.get('holds_by_cause') or {})}")
+    sides = s.get("deadline_misses_by_side") or {}
+    if s.get("deadline_misses") and sides:
+        console.print(
+            f"deadline misses: {sides.get('daemon', 0)} in the daemons (held in time), "
+            f"{sides.get('world', 0)} at the world (no command in time)"
+        )
     lat = s.get("decision_latency_s") or {}
     if lat:
         console.print(

@@ -93,7 +93,10 @@ def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]
     with pytest.raises(SystemExit) as info:
         main(argv)
     assert info.value.code == 2
-    assert "usage: aeroweaver" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err.startswith("aeroweaver: error: ")
+    assert err.count("\n") == 1  # one line, naming the command's --help
+    assert "--help'" in err
 
 
 def test_sim_defaults_match_the_paper_horizon() -> None:
@@ -110,9 +113,9 @@ def test_sim_accepts_every_task_name(task: str) -> None:
 @pytest.mark.parametrize(
     ("argv", "words"),
     [
-        (["sim", "coverage", "--uavs", "51"], "must be 1..50 UAVs, got 51"),
-        (["sim", "coverage", "--uavs", "0"], "must be 1..50 UAVs, got 0"),
-        (["sim", "coverage", "--uavs", "many"], "not a number of UAVs"),
+        (["sim", "coverage", "--uavs", "51"], "--uavs: 51 is out of range (1..50)"),
+        (["sim", "coverage", "--uavs", "0"], "--uavs: 0 is out of range (1..50)"),
+        (["sim", "coverage", "--uavs", "many"], "'many' is not a whole number"),
         (["sim", "search_and_rescue"], "invalid choice: 'search_and_rescue'"),
     ],
 )

@@ -75,7 +75,9 @@ async def test_two_daemons_fly_private_communication(tmp_path: object) -> None:
     assert r_stats.deadline_misses == 0  # type: ignore[attr-defined]
     # Every decision was remembered (keyword-built records), on disk.
     assert daemons[receiver].memory is not None
-    with ExperienceMemory(tmp_path / f"{receiver}.sqlite3") as memory:  # type: ignore[operator]
+    run = daemons[receiver].memory.run  # type: ignore[union-attr]
+    path = tmp_path / f"{receiver}.sqlite3"  # type: ignore[operator]
+    with ExperienceMemory(path, run=run) as memory:
         rows = memory.export(receiver, 0, final_only=False)
         assert [(r.round, r.skill) for r in rows] == [
             (0, "hold_position"),

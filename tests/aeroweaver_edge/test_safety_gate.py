@@ -244,7 +244,7 @@ def envelopes(draw: st.DrawFn) -> SafetyConfig:
         geofence_east_m=band(-1000.0, 1000.0),
         altitude_band_m=band(0.0, 200.0),
         max_speed_mps=draw(st.floats(0.1, 60.0)),
-        min_separation_m=draw(st.floats(0.0, 10.0)),
+        min_separation_m=draw(st.floats(0.5, 10.0)),
     )
 
 

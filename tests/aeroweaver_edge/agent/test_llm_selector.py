@@ -259,19 +259,28 @@ async def test_unprobed_selector_settles_from_its_first_answer(fp: FakeProvider)
 
 
 async def test_unprobed_selector_learns_rejection_from_a_400(fp: FakeProvider) -> None:
+    """The 400 is retried once without logprob parameters; its answer proves the cause and
+    already decides this round."""
     fp.policy = Policy(prefer="B", reject_logprobs=True)
     sel = selector(fp, None)
     try:
         first = await sel.score(request())
-        assert first.error is not None
+        assert first.error is None
         assert sel.probe is not None
         assert sel.probe.kind == "rejected"
+        assert "answered without them" in sel.probe.detail
         second = await sel.score(request())
     finally:
         await sel.aclose()
+    assert choose(first, LABELS, {}, beta=0.8).label == "B"
     assert second.error is None
     assert choose(second, LABELS, {}, beta=0.8).label == "B"
-    assert "logprobs" not in fp.chat_bodies()[-1]
+    bodies = fp.chat_bodies()
+    assert len(bodies) == 3  # refused, retried without logprobs, then never asked again
+    assert "logprobs" in bodies[0]
+    assert "logprobs" not in bodies[1]
+    assert "logprobs" not in bodies[2]
+    assert sel.requests_sent == 3
 
 
 async def test_unprobed_selector_settles_degenerate(fp: FakeProvider) -> None:

@@ -29,6 +29,7 @@ from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.wire import ExperienceRecord, Header
 
 T, R = "coverage", "searcher"
+PEER_RUN = "peer-run"
 
 
 @pytest.fixture
@@ -92,6 +93,7 @@ def peer_record(seq: int, **kw: object) -> ExperienceRecord:
         state_text="landmark l1 peer",
         skill="cover_landmark",
         invocation="cover_landmark(target=L1)",
+        run=PEER_RUN,
     )
     fields.update(kw)
     return ExperienceRecord(h=header(seq), **fields)  # type: ignore[arg-type]
@@ -411,14 +413,14 @@ def test_ingest_dedup_and_update(mem: ExperienceMemory) -> None:
     final = peer_record(8, reward=1.0, ret=2.5, final=True)
     assert mem.ingest(final) is True
     assert mem.ingest(peer_record(9, reward=1.0, ret=9.0)) is False  # never un-finalise
-    rec = mem.get("u9", 4, 2)
+    rec = mem.get("u9", 4, 2, run=PEER_RUN)
     assert rec is not None
-    assert (rec.ret, rec.final, rec.origin) == (2.5, True, "u9")
+    assert (rec.ret, rec.final, rec.origin, rec.run) == (2.5, True, "u9", PEER_RUN)
     assert [n.ret for n in mem.neighbourhood_of(T, R, s)] == [2.5]
     assert len(mem) == 1
     # a peer's record is credited by its publisher, not by our reward stream
     mem.add_reward("u9", 4, 2, 100.0, "sim")
-    assert one(mem, "u9", 4, 2).ret == 2.5
+    assert mem.get("u9", 4, 2, run=PEER_RUN) == rec
 
 
 def test_ingest_never_overwrites_own_records(mem: ExperienceMemory) -> None:
@@ -436,6 +438,7 @@ def test_ingest_never_overwrites_own_records(mem: ExperienceMemory) -> None:
         reward=7.0,
         ret=7.0,
         final=True,
+        run=mem.run,
     )
     assert mem.ingest(echo) is False
     assert one(mem, "u1", 0, 0).ret == 1.0
@@ -467,8 +470,9 @@ def test_ingest_round_trip_between_daemons(tmp_path: Path) -> None:
         a.finalise("u1", 1)
         for i, rec in enumerate(a.export_final("u1", 1)):
             assert b.ingest(rec.to_wire(header(i + 1, sender="u1"))) is True
-        mine = [(r.round, r.ret, r.final) for r in a.records(T, R)]
-        assert [(r.round, r.ret, r.final) for r in b.records(T, R)] == mine
+        mine = [(r.round, r.ret, r.final, r.run) for r in a.records(T, R)]
+        assert [(r.round, r.ret, r.final, r.run) for r in b.records(T, R)] == mine
+        assert {r.run for r in b.records(T, R)} == {a.run}
         assert {r.origin for r in b.records(T, R)} == {"u1"}
 
 
@@ -503,7 +507,7 @@ def test_restart_persistence(db: Path) -> None:
         hoods = [m.neighbourhood_of(T, R, q) for q in queries]
         rows = m.records(T, R)
     assert any(v != 0.0 for adv in before for v in adv.values())
-    with ExperienceMemory(db) as m:
+    with ExperienceMemory(db) as m:  # a restart is a new run: the old records stay as they are
         assert m.quarantined is None
         assert m.warm(T, R) == len(rows) == 19
         assert m.records(T, R) == rows
@@ -609,7 +613,9 @@ def test_disk_full_is_dropped_not_raised(mem: ExperienceMemory) -> None:
         )
     assert mem.write_errors > 0
     assert mem.advantages(T, R, "landmark l1", ["a"]) == {"a": 0.0}  # still answers
-    assert all(n.key[2] == 0 or mem.get(*n.key) for n in mem.neighbourhood_of(T, R, "landmark"))
+    assert all(
+        n.key[2] == 0 or mem.get(*n.key, run=n.run) for n in mem.neighbourhood_of(T, R, "landmark")
+    )
 
 
 def test_from_config_and_in_memory() -> None:

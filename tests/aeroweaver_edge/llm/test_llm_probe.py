@@ -76,12 +76,23 @@ async def test_threshold_is_configurable(fp: FakeProvider) -> None:
     assert (await probe(fp.base_url, min_label_mass=0.999)).kind == "low_label_mass"
 
 
-@pytest.mark.parametrize("quirk", ["hang", "server_error", "rate_limited", "bad_json"])
-async def test_unreachable(fp: FakeProvider, quirk: str) -> None:
+@pytest.mark.parametrize(
+    ("quirk", "kind"),
+    [
+        ("hang", "timeout"),
+        ("server_error", "server_error"),
+        ("rate_limited", "server_error"),
+        ("bad_json", "bad_response"),
+    ],
+)
+async def test_no_verdict_kinds(fp: FakeProvider, quirk: str, kind: str) -> None:
     fp.policy = QUIRKS[quirk]
     result = await probe(fp.base_url)
-    assert result.kind == "unreachable"
+    assert result.kind == kind
+    assert not result.verdict
     assert result.detail
+    assert "no verdict on logprobs yet" in result.line()
+    assert "correction OFF" not in result.line()  # the first answer will decide it
 
 
 async def test_unreachable_when_nothing_listens() -> None:

@@ -1,0 +1,62 @@
+"""The honest parts of a run summary, computed from the Commander's progress board: holds
+by cause, deadline misses on both sides, LLM requests, and the logprob class the daemons
+actually ended up with (which may differ from the start-up probe).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import Any
+
+from aeroweaver_edge.hold_reasons import count_causes
+from commander.progress import ProgressBoard
+
+
+def holds_by_cause(board: ProgressBoard) -> dict[str, int]:
+    total = count_causes(())
+    for p in board.uavs.values():
+        for cause, n in p.holds_by_cause.items():
+            total[cause] += n
+    return total
+
+
+def deadline_misses(board: ProgressBoard, world_misses: int) -> dict[str, int]:
+    """``daemon``: rounds a daemon cut off at its own deadline (it held in time);
+    ``world``: commands that never reached the world in time."""
+    daemon = sum(p.deadline_misses for p in board.uavs.values())
+    return {"daemon": daemon, "world": world_misses, "total": daemon + world_misses}
+
+
+def llm_calls(board: ProgressBoard) -> int:
+    return sum(p.llm_calls for p in board.uavs.values())
+
+
+def llm_classes(board: ProgressBoard) -> dict[str, int]:
+    """How many UAVs ended the run with each logprob class (from their last reports)."""
+    return dict(sorted(Counter(p.llm_class for p in board.uavs.values() if p.llm_class).items()))
+
+
+def probe_after_run(start_line: str | None, start_kind: str | None, board: ProgressBoard) -> str:
+    """The start-up probe line, plus what the daemons settled on when that differs (an
+    endpoint that was down at start-up, or a class decided from live answers)."""
+    if start_line is None:
+        return ""
+    classes = llm_classes(board)
+    if not classes or set(classes) == {start_kind}:
+        return start_line
+    now = ", ".join(f"{kind} ({n} UAV{'s' if n != 1 else ''})" for kind, n in classes.items())
+    on = "ON" if set(classes) == {"ok"} else "OFF" if "ok" not in classes else "mixed"
+    return f"{start_line} -> re-classified from live answers: {now}; correction {on}"
+
+
+def health_fields(
+    board: ProgressBoard, world_misses: int, probe_line: str | None, probe_kind: str | None
+) -> dict[str, Any]:
+    """Fields a ``RunSummary`` takes over as they are."""
+    return {
+        "holds_by_cause": holds_by_cause(board),
+        "deadline_misses_by_side": deadline_misses(board, world_misses),
+        "llm_calls": llm_calls(board),
+        "llm_classes": llm_classes(board),
+        "probe": probe_after_run(probe_line, probe_kind, board) or probe_line,
+    }
