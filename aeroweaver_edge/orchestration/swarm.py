@@ -32,8 +32,8 @@ from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
-from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.orchestration.run_health import health_fields
+from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.tasks import create
 from aeroweaver_edge.tasks.base import TaskDefinition

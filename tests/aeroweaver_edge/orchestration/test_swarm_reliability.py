@@ -12,8 +12,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from aeroweaver_edge.orchestration.swarm import RunSummary, SwarmOptions, run_swarm, write_json
-from aeroweaver_edge.orchestration.view import LiveView
 from rich.console import Console
 
 from aeroweaver_edge.agent.memory import ExperienceMemory
@@ -22,6 +20,8 @@ from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.hold_reasons import HOLD_CAUSES
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
+from aeroweaver_edge.orchestration.swarm import RunSummary, SwarmOptions, run_swarm, write_json
+from aeroweaver_edge.orchestration.view import LiveView
 
 NOT_STORED = ("no_assignment", "no_candidates", "llm_failure", "invalid_answer", "deadline")
 
