@@ -4,6 +4,11 @@ The roster comes from liveliness tokens, positions from state beacons, and messa
 this UAV's inbox. The communication radius (DESIGN §4.2) is enforced at the *sender* from
 the latest beacons, so a simulated swarm behaves like a radio mesh. Every receive-side
 check drops and counts instead of raising: a bad message must never stop the round loop.
+
+Receive-side bounds (``PeerLimits``) are defence in depth behind the transport's TLS, ACL
+and signatures: a forged future epoch cannot lock a sender out (``ReplayFilter``), pending
+messages are capped per sender, in count and in bytes, and far-future rounds are dropped,
+only known identities join the roster, and a beacon must be physically plausible.
 """
 
 from __future__ import annotations
@@ -11,10 +16,13 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import time
 from collections import Counter
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+
+import msgspec
 
 from .mesh import Declared, Mesh, MeshClosed, MeshError
 from .wire import (
@@ -34,6 +42,23 @@ Body = Mapping[str, str | int | float | bool]
 _ARRIVED_MEMORY = 4096  # (sender, seq) pairs remembered so an early arrival is not "missing"
 
 
+@dataclass(frozen=True)
+class PeerLimits:
+    """Receive-side bounds of one PeerLink. ``None`` turns a check off."""
+
+    known_peers: Collection[str] | None = None  # ids allowed in the roster (identity list)
+    max_pending: int = 256  # inbox messages waiting for their round
+    max_pending_per_sender: int = 64  # so one flooding peer cannot crowd out the others
+    max_pending_bytes: int = 256 * 1024
+    future_rounds: int = 2  # a message (or beacon) further ahead of our round is dropped
+    replay_quiet_s: float = 5.0  # an unauthenticated new epoch waits this long (or a leave)
+    max_epoch_step: int | None = None  # boot counters: refuse unauthenticated epoch leaps
+    max_speed_mps: float | None = None  # beacon plausibility: displacement <= speed * time
+    round_s: float = 0.5  # time one round stands for (lockstep rounds run faster than this)
+    motion_margin_m: float = 5.0  # position noise allowed on top of speed * time
+    max_abs_m: float | None = None  # no position further than this from the origin
+
+
 @dataclass
 class PeerStats:
     """Counters for reports and tests. ``dropped``: not sent; ``rejected``: not accepted."""
@@ -49,7 +74,13 @@ class PeerLink:
     """Roster, neighbour table and inbox of one UAV over a Mesh (which the caller owns)."""
 
     def __init__(
-        self, mesh: Mesh, keys: Keys, uav: str, headers: HeaderFactory, comm_radius_m: float
+        self,
+        mesh: Mesh,
+        keys: Keys,
+        uav: str,
+        headers: HeaderFactory,
+        comm_radius_m: float,
+        limits: PeerLimits | None = None,
     ) -> None:
         if headers.sender != uav:
             raise ValueError(f"header factory sends as {headers.sender!r}, not {uav!r}")
@@ -58,14 +89,23 @@ class PeerLink:
         self.uav = uav
         self.comm_radius_m = comm_radius_m
         self.stats = PeerStats()
+        self.limits = limits = limits or PeerLimits()
         self._mesh = mesh
         self._keys = keys
         self._headers = headers
-        self._replay = ReplayFilter()
+        self._replay = ReplayFilter(
+            quiet_s=limits.replay_quiet_s, max_epoch_step=limits.max_epoch_step
+        )
+        self._beacon_order = ReplayFilter(
+            quiet_s=limits.replay_quiet_s, max_epoch_step=limits.max_epoch_step
+        )
         self._roster: set[str] = set()
         self._beacons: dict[str, StateBeacon] = {}
+        self._beacon_seen: dict[str, float] = {}  # monotonic arrival of each latest beacon
         self._own: StateBeacon | None = None
         self._pending: list[InboxMessage] = []
+        self._pending_bytes: dict[tuple[str, int], int] = {}  # (sender, seq) -> encoded size
+        self._round: int | None = None  # our latest round (from our own beacon)
         self._arrived: dict[tuple[str, int], None] = {}  # insertion-ordered, bounded
         self._waiters: set[asyncio.Future[None]] = set()
         self._handles: list[Declared] = []
@@ -145,6 +185,7 @@ class PeerLink:
             status=status,
         )
         self._own = beacon
+        self._round = round
         self._mesh.put(self._keys.state(self.uav), beacon)
         return beacon
 
@@ -230,10 +271,18 @@ class PeerLink:
             self.stats.missing += len(missing)
             log.info("%s: %d expected message(s) missing: %s", self.uav, len(missing), missing)
         if max_round is None:
-            out, self._pending = self._pending, []
+            out, keep = self._pending, []
         else:
+            # Kept for a later round only if that round is near: leftovers of an earlier
+            # episode (rounds restart at 0) or forged far-future rounds are dropped here.
+            horizon = max_round + 1 + self.limits.future_rounds
             out = [m for m in self._pending if m.round <= max_round]
-            self._pending = [m for m in self._pending if m.round > max_round]
+            keep = [m for m in self._pending if max_round < m.round <= horizon]
+            for _ in range(len(self._pending) - len(out) - len(keep)):
+                self._reject("future_round", "pending")
+        self._pending = keep
+        kept = {(m.h.sender, m.h.seq) for m in keep}
+        self._pending_bytes = {k: v for k, v in self._pending_bytes.items() if k in kept}
         out.sort(key=lambda m: (m.h.sender, m.h.seq))
         return out
 
@@ -250,42 +299,102 @@ class PeerLink:
             self._reject("wrong_recipient", key)
         elif sender not in self._roster:
             self._reject("unknown_sender", key)
-        elif not self._replay.accept(msg.h):
-            self._reject("replay", key)
+        elif self._round is not None and msg.round > self._round + self.limits.future_rounds:
+            self._reject("future_round", key)
+        elif (full := self._pending_full(msg)) is not None:
+            self._reject(full, key)
+        elif why := self._replay.check(msg.h, authenticated=self._mesh.authenticated):
+            self._reject(why, key)
         else:
             self.stats.received += 1
             self._pending.append(msg)
+            self._pending_bytes[(sender, msg.h.seq)] = len(msgspec.msgpack.encode(msg))
             self._arrived[(sender, msg.h.seq)] = None
             if len(self._arrived) > _ARRIVED_MEMORY:
                 del self._arrived[next(iter(self._arrived))]
             self._notify()
 
+    def _pending_full(self, msg: InboxMessage) -> str | None:
+        """Why ``msg`` does not fit in the pending buffer (None: it fits)."""
+        lim = self.limits
+        if len(self._pending) >= lim.max_pending:
+            return "inbox_full"
+        mine = sum(1 for m in self._pending if m.h.sender == msg.h.sender)
+        if mine >= lim.max_pending_per_sender:
+            return "inbox_full_sender"
+        size = len(msgspec.msgpack.encode(msg))
+        if sum(self._pending_bytes.values()) + size > lim.max_pending_bytes:
+            return "inbox_full_bytes"
+        return None
+
     def _on_beacon(self, item: tuple[str, StateBeacon]) -> bool:
-        """Latest wins by (epoch, seq); the key, the payload and the header must agree."""
+        """Latest wins by (epoch, seq); the key, the payload and the header must agree, and
+        the claimed position must be physically plausible."""
         key, beacon = item
         if beacon.uav == self.uav:
             return False  # our own beacon, delivered locally
         if key != self._keys.state(beacon.uav) or beacon.h.sender != beacon.uav:
             self._reject("spoofed_beacon", key)
             return False
-        prev = self._beacons.get(beacon.uav)
-        if prev is not None and (beacon.h.epoch, beacon.h.seq) <= (prev.h.epoch, prev.h.seq):
-            self._reject("stale_beacon", key)
+        known = self.limits.known_peers
+        if known is not None and beacon.uav not in known:
+            self._reject("unknown_peer", key)
+            return False
+        implausible = self._implausible(beacon)
+        if implausible is not None:
+            self._reject(implausible, key)
+            return False
+        why = self._beacon_order.check(beacon.h, authenticated=self._mesh.authenticated)
+        if why is not None:
+            self._reject("stale_beacon" if why == "replay" else why, key)
             return False
         self._beacons[beacon.uav] = beacon
+        self._beacon_seen[beacon.uav] = time.monotonic()
         self._notify()
         return True
+
+    def _implausible(self, beacon: StateBeacon) -> str | None:
+        """Why a beacon cannot be true, or None. Rounds restart with each episode, so a
+        beacon whose round is not after the previous one starts a new track (only the
+        absolute bound applies); otherwise displacement <= max speed x elapsed time, where
+        elapsed is the larger of the wall time since the last beacon and the rounds
+        between them (a lockstep round stands for ``round_s`` however fast it runs)."""
+        lim = self.limits
+        if not all(math.isfinite(x) for x in (*beacon.pos, *beacon.vel)):
+            return "non_finite_beacon"
+        if lim.max_abs_m is not None and math.hypot(*beacon.pos) > lim.max_abs_m:
+            return "implausible_position"
+        if self._round is not None and beacon.round > self._round + lim.future_rounds:
+            return "future_round"
+        prev = self._beacons.get(beacon.uav)
+        if lim.max_speed_mps is None or prev is None or beacon.round <= prev.round:
+            return None
+        elapsed = max(
+            time.monotonic() - self._beacon_seen.get(beacon.uav, time.monotonic()),
+            (beacon.round - prev.round) * lim.round_s,
+        )
+        if math.dist(prev.pos, beacon.pos) > lim.max_speed_mps * elapsed + lim.motion_margin_m:
+            return "implausible_motion"
+        return None
 
     def _on_alive(self, item: tuple[str, bool]) -> None:
         key, alive = item
         uav = key.rsplit("/", 1)[-1]
         if key != self._keys.alive_uav(uav) or uav == self.uav:
             return
+        known = self.limits.known_peers
+        if alive and known is not None and uav not in known:
+            self._reject("unknown_peer_token", key)
+            return
         if alive:
             self._roster.add(uav)
         else:
             self._roster.discard(uav)
             self._beacons.pop(uav, None)
+            self._beacon_seen.pop(uav, None)
+            # Its session ended: a restart's new epoch need not wait for the quiet time.
+            self._replay.release(uav)
+            self._beacon_order.release(uav)
         self._notify()
 
     # -- waiting ----------------------------------------------------------------------------
