@@ -233,6 +233,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_llm_flags(pr)
     pr.set_defaults(func=cmd_probe)
 
+    from aeroweaver_edge.security.cli import add_parsers as add_security_parsers
+
+    add_security_parsers(sub)  # keys init|rotate|show, router
+
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument("what", choices=["memory"])
     b.add_argument("--records", type=int, default=10_000)

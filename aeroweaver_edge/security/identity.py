@@ -22,7 +22,6 @@ import base64
 import datetime as dt
 import json
 import os
-import shutil
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -205,14 +204,19 @@ class SwarmPki:
         members: Mapping[str, Role],
         *,
         hosts: Iterable[str] = (),
+        host_of: Mapping[str, Sequence[str]] | None = None,
         days: int = 30,
         ca_days: int = 365,
         overwrite: bool = False,
     ) -> SwarmPki:
-        """Make a CA, every identity's keys and certificate, and the signed list."""
+        """Make a CA, every identity's keys and certificate, and the signed list.
+        ``hosts`` go into every certificate's SANs, ``host_of[name]`` into one's."""
         check_id(swarm, "swarm id")
         if not members:
             raise PkiError("a swarm needs at least one identity")
+        unknown = sorted(set(host_of or {}) - set(members))
+        if unknown:
+            raise PkiError(f"addresses for unknown identities: {', '.join(unknown)}")
         root = Path(root)
         if (root / CA_CERT).exists() and not overwrite:
             raise PkiError(f"{root}: already holds a swarm PKI (use a new directory)")
@@ -221,13 +225,14 @@ class SwarmPki:
         pki.write_file(root / CA_KEY, ca.key_pem, private=True)
         os.chmod(root / "ca", 0o700)
         (root / STATE).mkdir(parents=True, exist_ok=True)
-        san = (*pki.DEFAULT_HOSTS, *hosts)
+        hosts, host_of = list(hosts), {k: list(v) for k, v in (host_of or {}).items()}
         made = {
-            name: _issue_member(root, ca, name, role, san, days) for name, role in members.items()
+            name: _issue_member(root, ca, name, role, _san(hosts, host_of, name), days)
+            for name, role in members.items()
         }
         ids = IdentityList(swarm, 1, _stamp(), made)
         pki.write_file(root / IDENTITIES, ids.signed_document(ca))
-        _write_meta(root, {"swarm": swarm, "hosts": list(hosts), "days": days})
+        _write_meta(root, {"swarm": swarm, "hosts": hosts, "host_of": host_of, "days": days})
         return cls(root, ids)
 
     @classmethod
@@ -237,7 +242,7 @@ class SwarmPki:
             raise PkiError(f"{root}: no {IDENTITIES} here (run `aeroweaver keys init` first)")
         return cls(root, IdentityList.load(root / IDENTITIES, root / CA_CERT))
 
-    def rotate(self, name: str, *, hosts: Iterable[str] | None = None) -> Member:
+    def rotate(self, name: str) -> Member:
         """Re-issue one identity (new TLS key + certificate, new signing key) and re-sign the
         list with a higher version. Distribute ``identities.json`` and the identity's folder;
         other processes pick the list up on their next start."""
@@ -247,7 +252,7 @@ class SwarmPki:
             )
         ca = pki.load_ca(self.root / CA_CERT, self.root / CA_KEY)
         meta = _read_meta(self.root)
-        san = (*pki.DEFAULT_HOSTS, *(meta.get("hosts", []) if hosts is None else hosts))
+        san = _san(meta.get("hosts", []), meta.get("host_of", {}), name)
         role = self.identities.members[name].role
         member = _issue_member(self.root, ca, name, role, san, int(meta.get("days", 30)))
         members = {**self.identities.members, name: member}
@@ -310,6 +315,10 @@ class SwarmPki:
         return rows
 
 
+def _san(hosts: Sequence[str], host_of: Mapping[str, Sequence[str]], name: str) -> list[str]:
+    return [*pki.DEFAULT_HOSTS, *hosts, *host_of.get(name, ())]
+
+
 def _issue_member(
     root: Path, ca: pki.CertifiedKey, name: str, role: Role, san: Sequence[str], days: int
 ) -> Member:
@@ -338,8 +347,3 @@ def _read_meta(root: Path) -> dict[str, Any]:
     except (OSError, ValueError):
         return {}
     return data if isinstance(data, dict) else {}
-
-
-def remove(root: Path) -> None:
-    """Delete a (temporary) swarm directory."""
-    shutil.rmtree(root, ignore_errors=True)
