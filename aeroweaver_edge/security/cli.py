@@ -90,7 +90,7 @@ def _hosts(items: list[str]) -> tuple[list[str], dict[str, list[str]]]:
 
 
 def cmd_keys_init(args: argparse.Namespace) -> int:
-    from aeroweaver_edge.config import ConfigError
+    from aeroweaver_edge.config import ConfigError, endpoint_is_secure
     from aeroweaver_edge.security import render
     from aeroweaver_edge.security.identity import ROUTER, SwarmPki, default_members
     from aeroweaver_edge.security.pki import PkiError, write_file
@@ -99,6 +99,9 @@ def cmd_keys_init(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if args.uavs < 1:
         return _fail("keys init: --uavs must be at least 1")
+    for ep in [args.listen, *args.connect]:
+        if not endpoint_is_secure(ep):
+            return _fail(f"keys init: {ep!r}: a swarm's endpoints are tls/ (or quic/)")
     if out.exists() and any(out.iterdir()):
         return _fail(f"keys init: {out} is not empty (use a new directory)")
     try:

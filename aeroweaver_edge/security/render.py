@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import Any, Literal
 
-from aeroweaver_edge.config import MeshConfig
+from aeroweaver_edge.config import MeshConfig, parse_config
 from aeroweaver_edge.mesh import load_mesh_security, zenoh_settings
 from aeroweaver_edge.security.identity import SwarmPki
 from aeroweaver_edge.security.policy import Role
@@ -50,16 +50,12 @@ def mesh_config(
     lease_ms: int = 3000,
 ) -> MeshConfig:
     """The secured ``[mesh]`` section of one process (paths as installed on the target)."""
-    return MeshConfig(
-        mode=mode,
-        listen=listen,
-        connect=connect,
-        namespace=namespace,
-        lease_ms=lease_ms,
-        security=pki.security_for(
-            name, install_dir=install_dir, state_dir=state_dir, verify_name=verify_name
-        ),
+    sec = pki.security_for(
+        name, install_dir=install_dir, state_dir=state_dir, verify_name=verify_name
     )
+    data = {"mode": mode, "listen": listen, "connect": connect, "namespace": namespace,
+            "lease_ms": lease_ms, "security": sec.model_dump()}  # fmt: skip
+    return parse_config(data, MeshConfig, f"{name} [mesh]")
 
 
 def zenoh_json5(pki: SwarmPki, cfg: MeshConfig, name: str) -> str:
