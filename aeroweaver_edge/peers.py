@@ -93,10 +93,9 @@ class PeerLink:
         self._mesh = mesh
         self._keys = keys
         self._headers = headers
+        # One epoch per sender for its beacons and its messages (whichever came first fixes
+        # it), each stream in its own sequence order.
         self._replay = ReplayFilter(
-            quiet_s=limits.replay_quiet_s, max_epoch_step=limits.max_epoch_step
-        )
-        self._beacon_order = ReplayFilter(
             quiet_s=limits.replay_quiet_s, max_epoch_step=limits.max_epoch_step
         )
         self._roster: set[str] = set()
@@ -303,7 +302,9 @@ class PeerLink:
             self._reject("future_round", key)
         elif (full := self._pending_full(msg)) is not None:
             self._reject(full, key)
-        elif why := self._replay.check(msg.h, authenticated=self._mesh.authenticated):
+        elif why := self._replay.check(
+            msg.h, authenticated=self._mesh.authenticated, stream="inbox"
+        ):
             self._reject(why, key)
         else:
             self.stats.received += 1
@@ -344,7 +345,7 @@ class PeerLink:
         if implausible is not None:
             self._reject(implausible, key)
             return False
-        why = self._beacon_order.check(beacon.h, authenticated=self._mesh.authenticated)
+        why = self._replay.check(beacon.h, authenticated=self._mesh.authenticated, stream="beacon")
         if why is not None:
             self._reject("stale_beacon" if why == "replay" else why, key)
             return False
@@ -392,9 +393,10 @@ class PeerLink:
             self._roster.discard(uav)
             self._beacons.pop(uav, None)
             self._beacon_seen.pop(uav, None)
-            # Its session ended: a restart's new epoch need not wait for the quiet time.
+            # Its session ended: a restart's new epoch need not wait for the quiet time, and
+            # its sequence numbers start again (an old (sender, seq) is not an arrival).
             self._replay.release(uav)
-            self._beacon_order.release(uav)
+            self._arrived = {k: None for k in self._arrived if k[0] != uav}
         self._notify()
 
     # -- waiting ----------------------------------------------------------------------------

@@ -362,20 +362,22 @@ class HeaderFactory:
 @dataclass
 class _Window:
     epoch: int
-    seq: int
-    seen: float  # monotonic time of the last accepted message
+    seen: float  # monotonic time of the last accepted message (any stream)
+    seqs: dict[str, int]  # last accepted seq per stream, within this epoch
     released: bool = False
 
 
 class ReplayFilter:
     """Delivers each (sender, epoch, seq) at most once, in increasing order per sender.
 
-    A newer epoch means the sender restarted. An *authenticated* epoch (a signature covers
-    the header) is taken at once. An unauthenticated one could be forged, and a forged
-    future epoch would otherwise lock the genuine sender out, so it moves the window only
-    once the current epoch is over (the sender's session ended, ``release``, or it has been
-    silent for ``quiet_s``) and, with ``max_epoch_step`` (boot counters count restarts, so
-    a genuine step is small), never by more than that.
+    Streams (e.g. ``"inbox"`` and ``"beacon"``) keep their own sequence order but share the
+    sender's epoch, so whatever was heard first from a sender fixes its epoch for all of
+    them. A newer epoch means the sender restarted. An *authenticated* epoch (a signature
+    covers the header) is taken at once. An unauthenticated one could be forged, and a
+    forged future epoch would otherwise lock the genuine sender out, so it moves the window
+    only once the current epoch is over (the sender's session ended, ``release``, or it has
+    been silent for ``quiet_s``) and, with ``max_epoch_step`` (boot counters count restarts,
+    so a genuine step is small), never by more than that.
     """
 
     def __init__(
@@ -390,29 +392,36 @@ class ReplayFilter:
         self._clock = clock
         self._latest: dict[str, _Window] = {}
 
-    def check(self, header: Header, *, authenticated: bool = False) -> str | None:
+    def check(self, header: Header, *, authenticated: bool = False, stream: str = "") -> str | None:
         """``None`` if delivered (and recorded); otherwise why not: ``replay``,
         ``old_epoch``, ``epoch_jump`` or ``epoch_contested``."""
         now = self._clock()
         prev = self._latest.get(header.sender)
+        if prev is not None and header.epoch == prev.epoch:
+            if header.seq <= prev.seqs.get(stream, -1):
+                return "replay"
+            prev.seqs[stream] = header.seq
+            prev.seen = now
+            return None
         if prev is not None:
-            if header.epoch == prev.epoch:
-                if header.seq <= prev.seq:
-                    return "replay"
-            elif header.epoch < prev.epoch:
+            if header.epoch < prev.epoch:
                 return "old_epoch"
-            elif not authenticated:
+            if not authenticated:
                 if self.max_epoch_step is not None and (
                     header.epoch - prev.epoch > self.max_epoch_step
                 ):
                     return "epoch_jump"
                 if not prev.released and now - prev.seen < self.quiet_s:
                     return "epoch_contested"
-        self._latest[header.sender] = _Window(header.epoch, header.seq, now)
+        self._latest[header.sender] = _Window(header.epoch, now, {stream: header.seq})
         return None
 
-    def accept(self, header: Header, *, authenticated: bool = False) -> bool:
-        return self.check(header, authenticated=authenticated) is None
+    def accept(self, header: Header, *, authenticated: bool = False, stream: str = "") -> bool:
+        return self.check(header, authenticated=authenticated, stream=stream) is None
+
+    def epoch_of(self, sender: str) -> int | None:
+        window = self._latest.get(sender)
+        return window.epoch if window is not None else None
 
     def release(self, sender: str) -> None:
         """The sender's session ended (its liveliness token went away): its next epoch may
