@@ -9,7 +9,9 @@ Authority comes from the live Commander, not from a payload's key or epoch:
   one), so with ``track_commander`` the first epoch seen after the Commander's liveliness
   token appears fixes the session and any other epoch is refused while it lasts;
 - with ``track_commander`` authority ends with the Commander's liveliness: context and
-  assignment are dropped (the UAV holds) and the next token starts a fresh session.
+  assignment are dropped (the UAV holds) and the next token starts a fresh session; the
+  daemon should then query the context and its assignment (the Commander serves both), as
+  it does at start-up, since a payload that raced ahead of the token is not kept.
 
 Without ``track_commander`` (a daemon that does not watch the Commander's token) a newer
 epoch always wins, as before; that mode is only safe with signatures.
@@ -38,8 +40,11 @@ class MissionState:
     _alive: bool = False
     _epoch: int | None = None  # epoch of the current Commander session
     _floor: int = -1  # highest authenticated Commander epoch: older sessions stay out
-    # Payloads that came before the Commander's token did (links come up in any order).
+    # Payloads that came before the first Commander token did (links come up in any order).
+    # Between sessions nothing is kept: a late payload of the old session must not fix the
+    # epoch of the next one (a restarted Commander is caught up by a query instead).
     _early: list[tuple[MissionContext | Assignment, bool]] = field(default_factory=list)
+    _ever_alive: bool = False
 
     def update_context(self, ctx: MissionContext, *, authenticated: bool = False) -> None:
         """Take ``ctx`` if it is admitted and newer; a refusal is counted in ``rejected``."""
@@ -65,9 +70,9 @@ class MissionState:
         self._alive = alive
         self._epoch = None  # a token is one session; the next one may start afresh
         if not alive:
-            self._early.clear()
             self._drop()
             return
+        self._ever_alive = True
         early, self._early = self._early, []
         for msg, authenticated in early:
             if isinstance(msg, MissionContext):
@@ -78,7 +83,7 @@ class MissionState:
     def _admit(self, msg: MissionContext | Assignment, authenticated: bool) -> str | None:
         h: Header = msg.h
         why = self._check(h, authenticated)
-        if why == "no_live_commander":
+        if why == "no_live_commander" and not self._ever_alive:
             self._early = [*self._early[-7:], (msg, authenticated)]  # bounded
         if why is not None:
             self.rejected[why] += 1
