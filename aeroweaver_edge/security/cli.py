@@ -46,6 +46,16 @@ def add_parsers(sub: Any) -> None:
         help="boot counters on the vehicles (default <install-dir>/state; /var/lib/aeroweaver)",
     )
     ki.add_argument(
+        "--key-dir",
+        help="where each UAV daemon reads its private keys ({name} = identity), e.g. "
+        "/run/credentials/aeroweaver-daemon@{name}.service (systemd LoadCredential=)",
+    )
+    ki.add_argument(
+        "--router-key-dir",
+        help="where the router reads its private key "
+        "(e.g. /run/credentials/aeroweaver-router.service)",
+    )
+    ki.add_argument(
         "--no-verify-name",
         action="store_true",
         help="do not require the dialled address in the peer's certificate (dynamic addresses)",
@@ -122,7 +132,9 @@ def cmd_keys_init(args: argparse.Namespace) -> int:
             connect = [] if name == ROUTER else list(args.connect)
             cfg = render.mesh_config(
                 pki, name, listen=listen, connect=connect, mode=mode, namespace=args.namespace,
-                install_dir=install, state_dir=state, verify_name=not args.no_verify_name,
+                install_dir=install, state_dir=state,
+                key_dir={Role.UAV: args.key_dir, Role.ROUTER: args.router_key_dir}.get(role),
+                verify_name=not args.no_verify_name,
             )  # fmt: skip
             d = pki.paths(name).dir
             write_file(d / "zenoh.json5", render.zenoh_json5(pki, cfg, name).encode())

@@ -272,20 +272,24 @@ class SwarmPki:
         acl: bool = True,
         verify_name: bool = True,
         install_dir: Path | None = None,
+        key_dir: str | None = None,
     ) -> SecurityConfig:
         """The ``[mesh.security]`` section for one process. ``install_dir``: where this
-        directory will live on the target machine, if not here."""
+        directory will live on the target machine, if not here. ``key_dir``: where the
+        process finds its two private keys instead (``{name}`` is replaced), e.g. systemd's
+        ``/run/credentials/aeroweaver-daemon@{name}.service`` with ``LoadCredential=``."""
         if name not in self.identities.members:
             raise PkiError(f"unknown identity {name!r}")
         base = install_dir or self.root.resolve()
         role = self.identities.members[name].role
         signs = role not in (Role.OBSERVER, Role.ROUTER)
+        keys = Path(key_dir.replace("{name}", name)) if key_dir else base / name
         return SecurityConfig(
             identity=name,
             ca=str(base / CA_CERT),
             cert=str(base / name / "tls.crt"),
-            key=str(base / name / "tls.key"),
-            signing_key=str(base / name / "sign.key") if signs else None,
+            key=str(keys / "tls.key"),
+            signing_key=str(keys / "sign.key") if signs else None,
             identities=str(base / IDENTITIES),
             acl=acl,
             sign=sign,
@@ -329,7 +333,7 @@ def _issue_member(
     pki.write_file(d / "tls.crt", tls.cert_pem)
     pki.write_file(d / "tls.key", tls.key_pem, private=True)
     pki.write_file(d / "sign.key", pki.signing_key_pem(signing), private=True)
-    os.chmod(d, 0o700)
+    os.chmod(d, 0o755)  # the certificate is public; the two keys inside are 0600
     return Member(name, role, pki.raw_public(signing), pki.cert_fingerprint(tls.cert_pem))
 
 

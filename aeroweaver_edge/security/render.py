@@ -46,12 +46,13 @@ def mesh_config(
     namespace: str | None = None,
     install_dir: Path | None = None,
     state_dir: Path | None = None,
+    key_dir: str | None = None,
     verify_name: bool = True,
     lease_ms: int = 3000,
 ) -> MeshConfig:
     """The secured ``[mesh]`` section of one process (paths as installed on the target)."""
     sec = pki.security_for(
-        name, install_dir=install_dir, state_dir=state_dir, verify_name=verify_name
+        name, install_dir=install_dir, state_dir=state_dir, key_dir=key_dir, verify_name=verify_name
     )
     data = {"mode": mode, "listen": listen, "connect": connect, "namespace": namespace,
             "lease_ms": lease_ms, "security": sec.model_dump()}  # fmt: skip

@@ -61,10 +61,11 @@ def test_private_keys_are_owner_only(swarm_pki: SwarmPki) -> None:
     for name in swarm_pki.identities.members:
         p = swarm_pki.paths(name)
         private += [p.tls_key, p.sign_key]
-        assert stat.S_IMODE(p.dir.stat().st_mode) == 0o700
+        assert stat.S_IMODE(p.dir.stat().st_mode) == 0o755  # a service user reads the cert
     for path in private:
         assert stat.S_IMODE(path.stat().st_mode) == 0o600, path
     assert stat.S_IMODE(swarm_pki.ca_cert.stat().st_mode) == 0o644
+    assert stat.S_IMODE((swarm_pki.root / "ca").stat().st_mode) == 0o700
     assert not list(swarm_pki.root.rglob(".*"))  # no temp files left behind
 
 
