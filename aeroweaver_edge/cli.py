@@ -115,14 +115,13 @@ def cmd_daemon(args: argparse.Namespace) -> int:
 def cmd_mission(args: argparse.Namespace) -> int:
     import json
 
-    from aeroweaver_edge.config import MeshConfig
+    from aeroweaver_edge.config import MeshConfig, parse_config
     from aeroweaver_edge.sim.view import LiveView, print_mission
     from commander.mission_start import MissionStartOptions, start_mission
 
-    mesh = MeshConfig(
-        listen=args.listen or ["tcp/127.0.0.1:0"], connect=args.connect or [],
-        namespace=args.namespace,
-    )  # fmt: skip
+    # A plain endpoint off this machine is refused here: one line, exit 2.
+    endpoints = {"listen": args.listen or ["tcp/127.0.0.1:0"], "connect": args.connect or []}
+    mesh = parse_config({**endpoints, "namespace": args.namespace}, MeshConfig, "mission start")
     llm = None if args.no_llm else _llm_from_args(args)
     opts = MissionStartOptions(
         text=args.text, swarm=args.swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,

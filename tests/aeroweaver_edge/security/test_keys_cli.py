@@ -105,6 +105,17 @@ def test_keys_show_and_rotate(tmp_path: Path, capsys: pytest.CaptureFixture[str]
         (["keys", "show", "--dir", "{d}/nothing"], "no identities.json"),
         (["keys", "rotate", "--dir", "{d}/nothing", "--identity", "uav0"], "no identities.json"),
         (["router", "--config", "{d}/none.json5"], "no such file"),
+        (
+            [
+                "mission",
+                "start",
+                "Cover the landmarks",
+                "--no-llm",
+                "--connect",
+                "tcp/10.0.0.2:7447",
+            ],
+            "plain link off this machine",
+        ),
     ],
 )
 def test_operator_mistakes_are_one_line_and_exit_2(
