@@ -50,7 +50,10 @@ class PeerLimits:
     max_pending: int = 256  # inbox messages waiting for their round
     max_pending_per_sender: int = 64  # so one flooding peer cannot crowd out the others
     max_pending_bytes: int = 256 * 1024
-    future_rounds: int = 2  # a message (or beacon) further ahead of our round is dropped
+    # A message (or beacon) further ahead of our round is dropped. This presumes rounds are
+    # aligned across the swarm (lockstep simulation; a field clock must number rounds from a
+    # shared start); None turns it off.
+    future_rounds: int | None = 2
     replay_quiet_s: float = 5.0  # an unauthenticated new epoch waits this long (or a leave)
     max_epoch_step: int | None = None  # boot counters: refuse unauthenticated epoch leaps
     max_speed_mps: float | None = None  # beacon plausibility: displacement <= speed * time
@@ -274,9 +277,14 @@ class PeerLink:
         else:
             # Kept for a later round only if that round is near: leftovers of an earlier
             # episode (rounds restart at 0) or forged far-future rounds are dropped here.
-            horizon = max_round + 1 + self.limits.future_rounds
+            ahead = self.limits.future_rounds
+            horizon = max_round + 1 + ahead if ahead is not None else None
             out = [m for m in self._pending if m.round <= max_round]
-            keep = [m for m in self._pending if max_round < m.round <= horizon]
+            keep = [
+                m
+                for m in self._pending
+                if m.round > max_round and (horizon is None or m.round <= horizon)
+            ]
             for _ in range(len(self._pending) - len(out) - len(keep)):
                 self._reject("future_round", "pending")
         self._pending = keep
@@ -298,7 +306,7 @@ class PeerLink:
             self._reject("wrong_recipient", key)
         elif sender not in self._roster:
             self._reject("unknown_sender", key)
-        elif self._round is not None and msg.round > self._round + self.limits.future_rounds:
+        elif self._too_far_ahead(msg.round):
             self._reject("future_round", key)
         elif (full := self._pending_full(msg)) is not None:
             self._reject(full, key)
@@ -314,6 +322,10 @@ class PeerLink:
             if len(self._arrived) > _ARRIVED_MEMORY:
                 del self._arrived[next(iter(self._arrived))]
             self._notify()
+
+    def _too_far_ahead(self, round_: int) -> bool:
+        ahead = self.limits.future_rounds
+        return ahead is not None and self._round is not None and round_ > self._round + ahead
 
     def _pending_full(self, msg: InboxMessage) -> str | None:
         """Why ``msg`` does not fit in the pending buffer (None: it fits)."""
@@ -365,7 +377,7 @@ class PeerLink:
             return "non_finite_beacon"
         if lim.max_abs_m is not None and math.hypot(*beacon.pos) > lim.max_abs_m:
             return "implausible_position"
-        if self._round is not None and beacon.round > self._round + lim.future_rounds:
+        if self._too_far_ahead(beacon.round):
             return "future_round"
         prev = self._beacons.get(beacon.uav)
         if lim.max_speed_mps is None or prev is None or beacon.round <= prev.round:

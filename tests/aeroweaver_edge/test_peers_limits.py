@@ -72,8 +72,11 @@ async def test_restart_after_leaving_is_accepted_and_old_epoch_refused(zenoh_net
     a2 = PeerLink(mesh, KEYS, "a", HeaderFactory("a", epoch=2), 55.0)
     await a2.start()
     assert await b.wait_for_peers({"a"}, 3.0)
+    assert await a2.wait_for_peers({"b"}, 3.0)
     a2.publish_beacon(1, HERE, STILL)
-    assert await eventually(lambda: "a" in b.neighbours)
+    assert await eventually(lambda: "a" in b.neighbours, 5.0)
+    b.publish_beacon(1, HERE, STILL)  # again, now that a2 listens
+    assert await eventually(lambda: "b" in a2.neighbours, 5.0)
     mallory.put(KEYS.inbox("b", "a"), msg("a", 1, 999), block=True)  # the old epoch, replayed
     ref2 = await a2.send("b", "status", {"again": True}, round=1)
     assert ref2 is not None
