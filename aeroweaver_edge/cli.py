@@ -425,6 +425,10 @@ def build_parser() -> argparse.ArgumentParser:
     mck.add_argument("dir", help="a --memory-dir (or one memory file)")
     mem.set_defaults(func=cmd_memory)
 
+    from aeroweaver_edge.security.cli import add_parsers as add_security_parsers
+
+    add_security_parsers(sub)  # keys init|rotate|show, router
+
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument("what", choices=["memory", "memory-kill", "scale", "reference"])
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")

@@ -6,12 +6,20 @@ error naming the key, not a silently ignored setting.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import tomllib
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Any, Literal, Self, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.errors import UserError
@@ -39,8 +47,62 @@ def _check_id(value: str, what: str) -> str:
     return value
 
 
+def check_id(value: str, what: str) -> str:
+    """Validate an identifier (UAV, swarm or process identity name); raises ValueError."""
+    return _check_id(value, what)
+
+
 class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SecurityConfig(_Section):
+    """``[mesh.security]``: this process's identity and key material (``aeroweaver keys
+    init`` writes it). With it every link is TLS with mutual authentication, the Zenoh ACL
+    is built from the CA-signed identity list, and payloads are signed and verified."""
+
+    identity: str  # this process's name = its certificate's CN (uav0, cmdr, world, ...)
+    ca: str  # swarm CA certificate (PEM)
+    cert: str  # this identity's TLS certificate (PEM)
+    key: str  # its TLS private key (PEM, 0600)
+    identities: str  # the CA-signed identity list (identities.json)
+    signing_key: str | None = None  # Ed25519 key (PEM, 0600); None: this process signs nothing
+    acl: bool = True  # load the Zenoh ACL generated from the identity list
+    sign: bool = True  # sign what we publish; accept only signed payloads by allowed authors
+    verify_name: bool = True  # TLS: the peer's certificate must name the address we dial
+    state_dir: str | None = None  # persisted boot counter (a restart is a new epoch)
+
+    @field_validator("identity")
+    @classmethod
+    def _identity(cls, value: str) -> str:
+        return _check_id(value, "identity")
+
+
+_SECURE_PROTOCOLS = frozenset({"tls", "quic"})
+_LOCAL_PROTOCOLS = frozenset({"unixsock-stream", "unixpipe", "serial", "vsock"})
+
+
+def endpoint_is_secure(endpoint: str) -> bool:
+    return endpoint.split("/", 1)[0] in _SECURE_PROTOCOLS
+
+
+def endpoint_is_loopback(endpoint: str) -> bool:
+    """True if a ``proto/host:port[#opts]`` endpoint stays on this machine."""
+    proto, _, rest = endpoint.partition("/")
+    if proto in _LOCAL_PROTOCOLS:
+        return True
+    address = rest.split("#", 1)[0].split("?", 1)[0]
+    host = address.rsplit(":", 1)[0] if ":" in address else address
+    host = host.strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False  # a host name: it may resolve anywhere
+
+
+_PROTECTED_OVERRIDES = ("transport/link/tls", "access_control", "transport/auth")
 
 
 class MeshConfig(_Section):
@@ -56,6 +118,35 @@ class MeshConfig(_Section):
     comm_radius_m: float = Field(default=d.COMM_RADIUS_M, gt=0)
     # Raw zenoh config overrides, path -> JSON5 value, applied last (escape hatch).
     zenoh_overrides: dict[str, str] = Field(default_factory=dict)
+    security: SecurityConfig | None = None
+    # Allow plain (unauthenticated, unencrypted) links off this machine. Never in the field.
+    insecure: bool = False
+
+    @model_validator(mode="after")
+    def _secure_endpoints(self) -> Self:
+        """A field config never listens or dials without TLS, and a secured one never opens
+        a side door (a plain endpoint, or overrides that replace its TLS or ACL settings)."""
+        for field_name in ("listen", "connect"):
+            for i, ep in enumerate(getattr(self, field_name)):
+                where = f"{field_name}[{i}] {ep!r}"
+                if self.security is not None and not endpoint_is_secure(ep):
+                    raise ValueError(
+                        f"{where}: with [mesh.security] every endpoint is tls/ or quic/"
+                    )
+                if self.security is None and endpoint_is_secure(ep):
+                    raise ValueError(
+                        f"{where}: a tls/ endpoint needs [mesh.security] (aeroweaver keys init)"
+                    )
+                if self.security is None and not self.insecure and not endpoint_is_loopback(ep):
+                    raise ValueError(
+                        f"{where}: plain link off this machine; add [mesh.security] "
+                        "(aeroweaver keys init) or set insecure = true"
+                    )
+        if self.security is not None:
+            for path in self.zenoh_overrides:
+                if path.strip("/").startswith(_PROTECTED_OVERRIDES):
+                    raise ValueError(f"zenoh_overrides[{path!r}]: set by [mesh.security]")
+        return self
 
 
 class LLMConfig(_Section):

@@ -14,6 +14,8 @@ UAV accepts and when is written once:
   counted; the result is sorted by (sender, sequence).
 
 Every check drops and counts instead of raising: a bad message never stops the round loop.
+The queue is bounded (``PeerLimits``: count, per sender, bytes, rounds ahead), so a flood of
+well-formed messages cannot grow it: defence in depth behind TLS, ACL and signatures.
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ import asyncio
 import logging
 import math
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass, field
+
+import msgspec
 
 from aeroweaver_edge.defaults import COMM_RADIUS_M
 from aeroweaver_edge.ports import Reach
@@ -33,6 +37,26 @@ log = logging.getLogger(__name__)
 
 ARRIVED_MEMORY = 4096  # (sender, seq) pairs remembered so an early arrival is not "missing"
 POSITION_MEMORY = 16  # rounds of own positions kept for judging late messages
+
+
+@dataclass(frozen=True)
+class PeerLimits:
+    """Receive-side bounds of one UAV's peer channel. ``None`` turns a check off."""
+
+    known_peers: Collection[str] | None = None  # ids allowed in the roster (identity list)
+    max_pending: int = 256  # inbox messages waiting for their round
+    max_pending_per_sender: int = 64  # so one flooding peer cannot crowd out the others
+    max_pending_bytes: int = 256 * 1024
+    # A message (or beacon) further ahead of our round is dropped. This presumes rounds are
+    # aligned across the swarm (lockstep simulation; a field clock must number rounds from a
+    # shared start); None turns it off.
+    future_rounds: int | None = 2
+    replay_quiet_s: float = 5.0  # an unauthenticated new epoch waits this long (or a leave)
+    max_epoch_step: int | None = None  # boot counters: refuse unauthenticated epoch leaps
+    max_speed_mps: float | None = None  # beacon plausibility: displacement <= speed * time
+    round_s: float = 0.5  # time one round stands for (lockstep rounds run faster than this)
+    motion_margin_m: float = 5.0  # position noise allowed on top of speed * time
+    max_abs_m: float | None = None  # no position further than this from the origin
 
 
 @dataclass
@@ -58,15 +82,19 @@ def within(radius_m: float = COMM_RADIUS_M) -> Reach:
 class Inbox:
     """One UAV's queue of received messages and the rule that decides which count."""
 
-    def __init__(self, uav: str, comm_radius_m: float = COMM_RADIUS_M) -> None:
+    def __init__(
+        self, uav: str, comm_radius_m: float = COMM_RADIUS_M, limits: PeerLimits | None = None
+    ) -> None:
         if comm_radius_m <= 0:
             raise ValueError(f"comm_radius_m must be > 0, got {comm_radius_m}")
         self.uav = uav
+        self.limits = limits or PeerLimits()
         self.stats = PeerStats()
         self.role = ""
         self.reach: Reach = within(comm_radius_m)
         self._positions: dict[int, Vec3] = {}
         self._pending: list[InboxMessage] = []
+        self._pending_bytes: dict[tuple[str, int], int] = {}  # (sender, seq) -> encoded size
         self._arrived: dict[tuple[str, int], None] = {}  # insertion-ordered, bounded
         self._waiters: set[asyncio.Future[None]] = set()
 
@@ -80,14 +108,58 @@ class Inbox:
         while len(self._positions) > POSITION_MEMORY:
             del self._positions[min(self._positions)]
 
+    @property
+    def round(self) -> int | None:
+        """This UAV's latest round (from its own beacons), or None before the first."""
+        return max(self._positions) if self._positions else None
+
+    def too_far_ahead(self, round_: int) -> bool:
+        """A round beyond the window this UAV may already hear of (a forged or stale one)."""
+        ahead, own = self.limits.future_rounds, self.round
+        return ahead is not None and own is not None and round_ > own + ahead
+
+    def forget(self, sender: str) -> None:
+        """The sender's session ended: its sequence numbers restart, so an old (sender,
+        seq) is no longer an arrival."""
+        self._arrived = {k: None for k in self._arrived if k[0] != sender}
+
     def reject(self, reason: str, what: str) -> None:
         self.stats.rejected[reason] += 1
         log.debug("%s: rejected %s (%s)", self.uav, what, reason)
 
+    @property
+    def pending(self) -> int:
+        """Messages queued for a later round."""
+        return len(self._pending)
+
+    def drop_pending(self) -> None:
+        """Forget every queued message (a harness standing in for collected rounds)."""
+        self._pending.clear()
+        self._pending_bytes.clear()
+
+    def admit(self, msg: InboxMessage) -> str | None:
+        """Why ``msg`` cannot be queued (too far ahead, buffer full), or None if it can.
+        Checked before the replay filter, so a refused message does not consume its
+        sequence number."""
+        if self.too_far_ahead(msg.round):
+            return "future_round"
+        lim = self.limits
+        if len(self._pending) >= lim.max_pending:
+            return "inbox_full"
+        mine = sum(1 for m in self._pending if m.h.sender == msg.h.sender)
+        if mine >= lim.max_pending_per_sender:
+            return "inbox_full_sender"
+        size = len(msgspec.msgpack.encode(msg))
+        if sum(self._pending_bytes.values()) + size > lim.max_pending_bytes:
+            return "inbox_full_bytes"
+        return None
+
     def offer(self, msg: InboxMessage) -> None:
-        """A message that passed the transport's checks: queue it and wake waiters."""
+        """A message that passed the transport's checks and ``admit``: queue it and wake
+        waiters."""
         self.stats.received += 1
         self._pending.append(msg)
+        self._pending_bytes[(msg.h.sender, msg.h.seq)] = len(msgspec.msgpack.encode(msg))
         self._arrived[(msg.h.sender, msg.h.seq)] = None
         if len(self._arrived) > ARRIVED_MEMORY:
             del self._arrived[next(iter(self._arrived))]
@@ -116,10 +188,23 @@ class Inbox:
             self.stats.missing += len(missing)
             log.info("%s: %d expected message(s) missing: %s", self.uav, len(missing), missing)
         if max_round is None:
-            ready, self._pending = self._pending, []
+            ready, keep = self._pending, []
         else:
+            # Kept for a later round only if that round is near: leftovers of an earlier
+            # episode (rounds restart at 0) or forged far-future rounds are dropped here.
+            ahead = self.limits.future_rounds
+            horizon = max_round + 1 + ahead if ahead is not None else None
             ready = [m for m in self._pending if m.round <= max_round]
-            self._pending = [m for m in self._pending if m.round > max_round]
+            keep = [
+                m
+                for m in self._pending
+                if m.round > max_round and (horizon is None or m.round <= horizon)
+            ]
+            for _ in range(len(self._pending) - len(ready) - len(keep)):
+                self.reject("future_round", "pending")
+        self._pending = keep
+        kept = {(m.h.sender, m.h.seq) for m in keep}
+        self._pending_bytes = {k: v for k, v in self._pending_bytes.items() if k in kept}
         out = []
         for m in ready:
             why = self._reaches(m)
@@ -155,4 +240,4 @@ class Inbox:
         return True
 
 
-__all__ = ["Inbox", "PeerStats", "within"]
+__all__ = ["Inbox", "PeerLimits", "PeerStats", "within"]

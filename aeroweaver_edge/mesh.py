@@ -11,6 +11,12 @@ non-daemon threads (no exit hang) and costs nothing that matters at swarm-contro
 because the callback is trivial. Opening, undeclaring and closing can block for up to a
 second, so they run in worker threads; ``put`` and issuing a ``get`` do not block (see
 notes/zenoh.md) and stay on the loop so the order of our own puts is kept.
+
+With ``[mesh.security]`` the session runs TLS with mutual authentication and the ACL built
+from the swarm's identity list, every payload we publish (puts and query replies) carries
+an Ed25519 signature in its attachment, and every payload we receive must carry a valid
+one by an author allowed to write its key; anything else is counted and dropped here,
+before any handler sees it (see ``security/``).
 """
 
 from __future__ import annotations
@@ -29,6 +35,8 @@ import msgspec
 import zenoh
 
 from .config import ConfigError, MeshConfig
+from .security.pki import PkiError
+from .security.transport import LoadedSecurity, load_security, zenoh_security_settings
 from .wire import Codec
 
 log = logging.getLogger(__name__)
@@ -63,9 +71,19 @@ class _Closed(enum.Enum):
 _CLOSED = _Closed.TOKEN
 
 
-def build_zenoh_config(cfg: MeshConfig) -> zenoh.Config:
-    """Translate a MeshConfig into a zenoh Config (overrides last; a bad one names its key)."""
-    conf = zenoh.Config()
+def load_mesh_security(cfg: MeshConfig) -> LoadedSecurity | None:
+    """Read and check ``cfg.security``'s files (blocking file IO: call off the loop)."""
+    if cfg.security is None:
+        return None
+    try:
+        return load_security(cfg.security, cfg.namespace)
+    except PkiError as exc:
+        raise ConfigError(f"mesh.security: {exc}") from None
+
+
+def zenoh_settings(cfg: MeshConfig, security: LoadedSecurity | None) -> list[tuple[str, Any]]:
+    """Every zenoh config entry we set, as (path, value); ``keys init`` renders the same
+    list into a JSON5 file, so a generated config is exactly what a daemon would open."""
     settings: list[tuple[str, Any]] = [
         ("mode", cfg.mode),
         ("listen/endpoints", cfg.listen),
@@ -83,9 +101,20 @@ def build_zenoh_config(cfg: MeshConfig) -> zenoh.Config:
     ]
     if cfg.namespace:
         settings.append(("namespace", cfg.namespace))
+    if security is not None:
+        settings.extend(zenoh_security_settings(security))
+    return settings
+
+
+def build_zenoh_config(cfg: MeshConfig, security: LoadedSecurity | None = None) -> zenoh.Config:
+    """Translate a MeshConfig into a zenoh Config (overrides last; a bad one names its key).
+    A secured config loads its key material here unless ``security`` is given."""
+    if security is None and cfg.security is not None:
+        security = load_mesh_security(cfg)
+    conf = zenoh.Config()
     names = {"listen/endpoints": "mesh.listen", "connect/endpoints": "mesh.connect",
              "namespace": "mesh.namespace"}  # fmt: skip
-    for path, value in settings:
+    for path, value in zenoh_settings(cfg, security):
         try:
             conf.insert_json5(path, json.dumps(value))
         except (zenoh.ZError, TypeError, ValueError) as exc:
@@ -230,10 +259,10 @@ class Subscription(Stream[tuple[str, T]], Generic[T]):
         self.kind = kind
         self.undecodable = 0
 
-    def _deliver(self, key: str, data: bytes) -> None:
+    def _deliver(self, key: str, data: bytes, attachment: bytes | None) -> None:
         if self._closed:
             return
-        msg = self._mesh.codec.decode(data, self.kind, key)
+        msg = self._mesh._accept(key, data, attachment, self.kind)
         if msg is None:
             self.undecodable += 1
             return
@@ -257,7 +286,8 @@ class Queryable(Declared):
             if not self._closed:
                 value = self._provider()
                 if value is not None:
-                    query.reply(self.key, self._mesh.codec.encode(value))
+                    data = self._mesh.codec.encode(value)
+                    query.reply(self.key, data, attachment=self._mesh._sign(self.key, value, data))
                     self.answered += 1
         except Exception:
             log.exception("queryable %s failed to answer", self.key)
@@ -276,9 +306,12 @@ class Mesh:
         node_id: str,
         codec: Codec,
         loop: asyncio.AbstractEventLoop,
+        security: LoadedSecurity | None = None,
     ) -> None:
         self.node_id = node_id
         self.codec = codec
+        self.security = security
+        self._auth = security.auth if security is not None else None
         self._session = session
         self._loop = loop
         self._declared: list[Declared] = []
@@ -288,7 +321,12 @@ class Mesh:
     async def open(cls, cfg: MeshConfig, *, node_id: str, codec: Codec | None = None) -> Mesh:
         """Open a session in a worker thread (zenoh.open blocks up to scouting.delay)."""
         _init_zenoh_log()
-        conf = build_zenoh_config(cfg)
+        if cfg.security is not None and cfg.security.identity != node_id:
+            raise ConfigError(
+                f"mesh.security.identity is {cfg.security.identity!r} but this node is {node_id!r}"
+            )
+        security = await asyncio.to_thread(load_mesh_security, cfg)
+        conf = build_zenoh_config(cfg, security)
         try:
             session = await asyncio.to_thread(zenoh.open, conf)
         except zenoh.ZError as exc:
@@ -298,7 +336,7 @@ class Mesh:
             ) from None
         log.debug("%s: zenoh session %s open", node_id, session.zid())
         loop = asyncio.get_running_loop()
-        return cls(session, node_id=node_id, codec=codec or Codec(), loop=loop)
+        return cls(session, node_id=node_id, codec=codec or Codec(), loop=loop, security=security)
 
     @property
     def session(self) -> zenoh.Session:
@@ -308,6 +346,43 @@ class Mesh:
     @property
     def closed(self) -> bool:
         return self._closing is not None
+
+    @property
+    def authenticated(self) -> bool:
+        """True if every payload this mesh delivers carried a valid signature by an author
+        allowed to write its key (so its header, including the epoch, is authentic)."""
+        return self._auth is not None
+
+    def security_summary(self) -> dict[str, Any]:
+        """``{"tls", "acl", "signed", ...}`` for run summaries (all False when insecure)."""
+        if self.security is None:
+            return {"tls": False, "mtls": False, "acl": False, "signed": False}
+        return self.security.summary
+
+    def _sign(self, key: str, msg: msgspec.Struct | None, data: bytes) -> bytes | None:
+        """The signature attachment for a payload we publish, or None when not signing.
+        A payload claiming another sender is a bug here: receivers would refuse it."""
+        if self._auth is None or self._auth.signer is None:
+            return None
+        sender = getattr(getattr(msg, "h", None), "sender", None)
+        if msg is not None and sender != self._auth.signer.name:
+            raise MeshError(
+                f"{self.node_id}: refusing to sign a payload from {sender!r} as "
+                f"{self._auth.signer.name!r}"
+            )
+        return self._auth.signer.sign(key, data)
+
+    def _accept(self, key: str, data: bytes, attachment: bytes | None, kind: type[T]) -> T | None:
+        """Decode, then (when secured) verify the signature against the claimed sender."""
+        msg = self.codec.decode(data, kind, key)
+        if msg is None or self._auth is None:
+            return msg
+        sender = getattr(getattr(msg, "h", None), "sender", "")
+        reason = self._auth.verifier.check(key, data, attachment, sender)
+        if reason is not None:
+            self.codec.stats.reject(reason, key, f"claimed sender {sender!r}")
+            return None
+        return msg
 
     def _check_open(self) -> None:
         if self._closing is not None:
@@ -326,12 +401,21 @@ class Mesh:
 
     def put(self, key: str, msg: msgspec.Struct, *, block: bool = False) -> None:
         """Encode and publish. DROP congestion control unless ``block`` (important, low rate)."""
-        self.put_bytes(key, self.codec.encode(msg), block=block)
+        self._check_open()
+        data = self.codec.encode(msg)
+        self._put(key, data, self._sign(key, msg, data), block)
 
     def put_bytes(self, key: str, data: bytes, *, block: bool = False) -> None:
+        """Publish pre-encoded bytes (signed as they are when this mesh signs)."""
         self._check_open()
+        self._put(key, data, self._sign(key, None, data), block)
+
+    def _put(self, key: str, data: bytes, attachment: bytes | None, block: bool) -> None:
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
-        self._session.put(key, data, congestion_control=cc)
+        if attachment is None:
+            self._session.put(key, data, congestion_control=cc)
+        else:
+            self._session.put(key, data, congestion_control=cc, attachment=attachment)
 
     # -- subscribing ------------------------------------------------------------------------
 
@@ -348,7 +432,13 @@ class Mesh:
         sub: Subscription[T] = Subscription(self, key_expr, kind, maxsize, on_item)
 
         def on_sample(sample: zenoh.Sample) -> None:
-            self._to_loop(sub._deliver, str(sample.key_expr), sample.payload.to_bytes())
+            att = sample.attachment
+            self._to_loop(
+                sub._deliver,
+                str(sample.key_expr),
+                sample.payload.to_bytes(),
+                att.to_bytes() if att is not None else None,
+            )
 
         handler = zenoh.handlers.Callback(on_sample, indirect=False)
         self._register(sub, self._session.declare_subscriber(key_expr, handler))
@@ -404,7 +494,7 @@ class Mesh:
     ) -> list[tuple[str, T]]:
         """Query every matching queryable; returns decoded replies (bad ones skipped)."""
         self._check_open()
-        raw: list[tuple[str, bytes]] = []
+        raw: list[tuple[str, bytes, bytes | None]] = []
         done: asyncio.Future[None] = self._loop.create_future()
 
         def finish() -> None:
@@ -414,7 +504,13 @@ class Mesh:
         def on_reply(reply: zenoh.Reply) -> None:
             sample = reply.ok
             if sample is not None:
-                self._to_loop(raw.append, (str(sample.key_expr), sample.payload.to_bytes()))
+                att = sample.attachment
+                item = (
+                    str(sample.key_expr),
+                    sample.payload.to_bytes(),
+                    att.to_bytes() if att is not None else None,
+                )
+                self._to_loop(raw.append, item)
 
         def on_done() -> None:
             self._to_loop(finish)
@@ -428,8 +524,8 @@ class Mesh:
         # zenoh ends the query itself at timeout_s; the margin only guards a lost on_done.
         await asyncio.wait({done}, timeout=timeout_s + 0.5)
         out: list[tuple[str, T]] = []
-        for key, data in raw:
-            msg = self.codec.decode(data, kind, key)
+        for key, data, attachment in raw:
+            msg = self._accept(key, data, attachment, kind)
             if msg is not None:
                 out.append((key, msg))
         return out

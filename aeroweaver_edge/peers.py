@@ -6,15 +6,22 @@ every peer's broadcast key (``to="*"``: one put reaches every subscriber). Wheth
 *reaches* this UAV is decided on receipt by the shared ``Inbox`` (routing rule + the
 positions of the round it was sent), so sending never waits for a peer. Every receive-side
 check drops and counts instead of raising.
+
+Receive-side bounds (``PeerLimits``) are defence in depth behind the transport's TLS, ACL
+and signatures: a forged future epoch cannot lock a sender out (``ReplayFilter``), the
+pending queue is capped (``Inbox``), only known identities join the roster, and a beacon
+must be physically plausible.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+import time
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
 
-from .inbox import Inbox, PeerStats
+from .inbox import Inbox, PeerLimits, PeerStats
 from .mesh import Declared, Mesh, MeshClosed, MeshError
 from .ports import Reach, Scalar
 from .wire import (
@@ -57,20 +64,27 @@ class PeerLink:
         *,
         announce: bool = True,
         track_neighbours: bool = False,
+        limits: PeerLimits | None = None,
     ) -> None:
         if headers.sender != uav:
             raise ValueError(f"header factory sends as {headers.sender!r}, not {uav!r}")
         self.uav = uav
         self.comm_radius_m = comm_radius_m
-        self.inbox = Inbox(uav, comm_radius_m)
+        self.limits = limits = limits or PeerLimits()
+        self.inbox = Inbox(uav, comm_radius_m, limits)
         self.announce = announce
         self.track_neighbours = track_neighbours
         self._mesh = mesh
         self._keys = keys
         self._headers = headers
-        self._replay = ReplayFilter()
+        # One epoch per sender for its beacons and its messages (whichever came first fixes
+        # it), each stream in its own sequence order.
+        self._replay = ReplayFilter(
+            quiet_s=limits.replay_quiet_s, max_epoch_step=limits.max_epoch_step
+        )
         self._roster: set[str] = set()
         self._beacons: dict[str, StateBeacon] = {}
+        self._beacon_seen: dict[str, float] = {}  # monotonic arrival of each latest beacon
         self._own: StateBeacon | None = None
         self._handles: list[Declared] = []
         self._token: Declared | None = None
@@ -228,8 +242,14 @@ class PeerLink:
             return  # our own broadcast, delivered locally
         elif sender not in self._roster:
             self.inbox.reject("unknown_sender", key)
-        elif not self._replay.accept(msg.h):
-            self.inbox.reject("replay", key)
+        elif (full := self.inbox.admit(msg)) is not None:
+            self.inbox.reject(full, key)
+        elif why := self._replay.check(
+            msg.h,
+            authenticated=self._mesh.authenticated,
+            stream="broadcast" if broadcast else "inbox",
+        ):
+            self.inbox.reject(why, key)
         else:
             self.inbox.offer(msg)
 
@@ -240,32 +260,75 @@ class PeerLink:
         self._accept(*item, broadcast=True)
 
     def _on_beacon(self, item: tuple[str, StateBeacon]) -> bool:
-        """Latest wins by (epoch, seq); the key, the payload and the header must agree."""
+        """Latest wins by (epoch, seq); the key, the payload and the header must agree, and
+        the claimed position must be physically plausible."""
         key, beacon = item
         if beacon.uav == self.uav:
             return False  # our own beacon, delivered locally
         if key != self._keys.state(beacon.uav) or beacon.h.sender != beacon.uav:
             self.inbox.reject("spoofed_beacon", key)
             return False
-        prev = self._beacons.get(beacon.uav)
-        if prev is not None and (beacon.h.epoch, beacon.h.seq) <= (prev.h.epoch, prev.h.seq):
-            self.inbox.reject("stale_beacon", key)
+        known = self.limits.known_peers
+        if known is not None and beacon.uav not in known:
+            self.inbox.reject("unknown_peer", key)
+            return False
+        implausible = self._implausible(beacon)
+        if implausible is not None:
+            self.inbox.reject(implausible, key)
+            return False
+        why = self._replay.check(beacon.h, authenticated=self._mesh.authenticated, stream="beacon")
+        if why is not None:
+            self.inbox.reject("stale_beacon" if why == "replay" else why, key)
             return False
         self._beacons[beacon.uav] = beacon
+        self._beacon_seen[beacon.uav] = time.monotonic()
         self.inbox.notify()
         return True
+
+    def _implausible(self, beacon: StateBeacon) -> str | None:
+        """Why a beacon cannot be true, or None. Rounds restart with each episode, so a
+        beacon whose round is not after the previous one starts a new track (only the
+        absolute bound applies); otherwise displacement <= max speed x elapsed time, where
+        elapsed is the larger of the wall time since the last beacon and the rounds
+        between them (a lockstep round stands for ``round_s`` however fast it runs)."""
+        lim = self.limits
+        if not all(math.isfinite(x) for x in (*beacon.pos, *beacon.vel)):
+            return "non_finite_beacon"
+        if lim.max_abs_m is not None and math.hypot(*beacon.pos) > lim.max_abs_m:
+            return "implausible_position"
+        if self.inbox.too_far_ahead(beacon.round):
+            return "future_round"
+        prev = self._beacons.get(beacon.uav)
+        if lim.max_speed_mps is None or prev is None or beacon.round <= prev.round:
+            return None
+        elapsed = max(
+            time.monotonic() - self._beacon_seen.get(beacon.uav, time.monotonic()),
+            (beacon.round - prev.round) * lim.round_s,
+        )
+        if math.dist(prev.pos, beacon.pos) > lim.max_speed_mps * elapsed + lim.motion_margin_m:
+            return "implausible_motion"
+        return None
 
     def _on_alive(self, item: tuple[str, bool]) -> None:
         key, alive = item
         uav = key.rsplit("/", 1)[-1]
         if key != self._keys.alive_uav(uav) or uav == self.uav:
             return
+        known = self.limits.known_peers
+        if alive and known is not None and uav not in known:
+            self.inbox.reject("unknown_peer_token", key)
+            return
         if alive:
             self._roster.add(uav)
         else:
             self._roster.discard(uav)
             self._beacons.pop(uav, None)
+            self._beacon_seen.pop(uav, None)
+            # Its session ended: a restart's new epoch need not wait for the quiet time, and
+            # its sequence numbers start again (an old (sender, seq) is not an arrival).
+            self._replay.release(uav)
+            self.inbox.forget(uav)
         self.inbox.notify()
 
 
-__all__ = ["PeerLink", "PeerStats"]
+__all__ = ["PeerLimits", "PeerLink", "PeerStats"]

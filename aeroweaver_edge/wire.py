@@ -12,6 +12,8 @@ from __future__ import annotations
 import logging
 import time
 from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Annotated, Any, Final, Literal, TypeVar
 
 import msgspec
@@ -278,7 +280,17 @@ class Keys:
         return self.sim(f"reward/{uav}")
 
     def sim_command(self, uav: str = "*") -> str:
-        return self.sim(f"command/{uav}")
+        """Under the UAV's own prefix: only that UAV may command its simulated body, and
+        the access rule stays "a UAV writes only its own keys"."""
+        return f"{self.root}/uav/{uav}/sim/command"
+
+    def uav_of(self, key: str) -> str | None:
+        """The UAV whose prefix ``key`` is under (``.../uav/<id>/...``), else None."""
+        prefix = f"{self.root}/uav/"
+        if not key.startswith(prefix):
+            return None
+        uav = key[len(prefix) :].split("/", 1)[0]
+        return uav or None
 
     @property
     def sim_episode(self) -> str:
@@ -377,16 +389,73 @@ class HeaderFactory:
         return self._seq
 
 
+@dataclass
+class _Window:
+    epoch: int
+    seen: float  # monotonic time of the last accepted message (any stream)
+    seqs: dict[str, int]  # last accepted seq per stream, within this epoch
+    released: bool = False
+
+
 class ReplayFilter:
-    """Delivers each (sender, epoch, seq) at most once; a newer epoch means a restart."""
+    """Delivers each (sender, epoch, seq) at most once, in increasing order per sender.
 
-    def __init__(self) -> None:
-        self._latest: dict[str, tuple[int, int]] = {}
+    Streams (e.g. ``"inbox"`` and ``"beacon"``) keep their own sequence order but share the
+    sender's epoch, so whatever was heard first from a sender fixes its epoch for all of
+    them. A newer epoch means the sender restarted. An *authenticated* epoch (a signature
+    covers the header) is taken at once. An unauthenticated one could be forged, and a
+    forged future epoch would otherwise lock the genuine sender out, so it moves the window
+    only once the current epoch is over (the sender's session ended, ``release``, or it has
+    been silent for ``quiet_s``) and, with ``max_epoch_step`` (boot counters count restarts,
+    so a genuine step is small), never by more than that.
+    """
 
-    def accept(self, header: Header) -> bool:
+    def __init__(
+        self,
+        *,
+        quiet_s: float = 5.0,
+        max_epoch_step: int | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.quiet_s = quiet_s
+        self.max_epoch_step = max_epoch_step
+        self._clock = clock
+        self._latest: dict[str, _Window] = {}
+
+    def check(self, header: Header, *, authenticated: bool = False, stream: str = "") -> str | None:
+        """``None`` if delivered (and recorded); otherwise why not: ``replay``,
+        ``old_epoch``, ``epoch_jump`` or ``epoch_contested``."""
+        now = self._clock()
         prev = self._latest.get(header.sender)
-        cur = (header.epoch, header.seq)
-        if prev is not None and cur <= prev:
-            return False
-        self._latest[header.sender] = cur
-        return True
+        if prev is not None and header.epoch == prev.epoch:
+            if header.seq <= prev.seqs.get(stream, -1):
+                return "replay"
+            prev.seqs[stream] = header.seq
+            prev.seen = now
+            return None
+        if prev is not None:
+            if header.epoch < prev.epoch:
+                return "old_epoch"
+            if not authenticated:
+                if self.max_epoch_step is not None and (
+                    header.epoch - prev.epoch > self.max_epoch_step
+                ):
+                    return "epoch_jump"
+                if not prev.released and now - prev.seen < self.quiet_s:
+                    return "epoch_contested"
+        self._latest[header.sender] = _Window(header.epoch, now, {stream: header.seq})
+        return None
+
+    def accept(self, header: Header, *, authenticated: bool = False, stream: str = "") -> bool:
+        return self.check(header, authenticated=authenticated, stream=stream) is None
+
+    def epoch_of(self, sender: str) -> int | None:
+        window = self._latest.get(sender)
+        return window.epoch if window is not None else None
+
+    def release(self, sender: str) -> None:
+        """The sender's session ended (its liveliness token went away): its next epoch may
+        take over without waiting for ``quiet_s``. Older epochs stay refused."""
+        window = self._latest.get(sender)
+        if window is not None:
+            window.released = True

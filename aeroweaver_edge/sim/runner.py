@@ -130,7 +130,7 @@ class WorldRunner:
 
     async def _pump_commands(self) -> None:
         async for key, cmd in self.mesh.subscribe(self.keys.sim_command("*"), SimCommand):
-            if last_chunk(key) != cmd.uav or cmd.h.sender != cmd.uav:
+            if self.keys.uav_of(key) != cmd.uav or cmd.h.sender != cmd.uav:
                 self.stats.rejected_commands += 1  # a UAV may only command its own body
                 continue
             if (cmd.episode, cmd.round) != self._where:

@@ -67,6 +67,7 @@ uav = "uav-7"
 swarm = "blue_team"
 [mesh]
 connect = ["tcp/10.0.0.1:7447"]
+insecure = true  # a plain link off this machine must be asked for
 lease_ms = 3000
 [agent]
 selector = "scripted"

@@ -387,12 +387,54 @@ def test_replay_filter_drops_duplicates_and_older_seq() -> None:
     assert rf.accept(_h("a", 1, 100))  # gaps are fine
 
 
-def test_replay_filter_accepts_a_new_epoch_and_refuses_the_old_one() -> None:
+def test_replay_filter_takes_an_authenticated_new_epoch_at_once() -> None:
     rf = ReplayFilter()
     assert rf.accept(_h("a", 1, 50))
-    assert rf.accept(_h("a", 2, 1))  # restart: sequence starts again
-    assert not rf.accept(_h("a", 1, 51))  # pre-restart traffic replayed
+    assert rf.accept(_h("a", 2, 1), authenticated=True)  # restart: sequence starts again
+    assert rf.check(_h("a", 1, 51), authenticated=True) == "old_epoch"  # pre-restart replay
     assert rf.accept(_h("a", 2, 2))
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_forged_future_epoch_cannot_poison_a_live_sender() -> None:
+    """The issue-10 attack: one unsigned message with a future epoch used to make every
+    later genuine message a 'replay'. While the sender is live it is now refused."""
+    clock = FakeClock()
+    rf = ReplayFilter(quiet_s=5.0, clock=clock)
+    assert rf.accept(_h("a", 7, 10))
+    assert rf.check(_h("a", 2**62, 1)) == "epoch_contested"
+    clock.now += 4.99
+    assert rf.check(_h("a", 8, 1)) == "epoch_contested"  # still inside the quiet time
+    for seq in range(11, 20):
+        assert rf.accept(_h("a", 7, seq))  # the genuine sender is unaffected
+
+
+def test_unauthenticated_new_epoch_after_leave_or_silence() -> None:
+    clock = FakeClock()
+    rf = ReplayFilter(quiet_s=5.0, clock=clock)
+    assert rf.accept(_h("a", 7, 10))
+    rf.release("a")  # its liveliness token went away: the session ended
+    assert rf.check(_h("a", 6, 99)) == "old_epoch"  # older epochs stay refused
+    assert rf.accept(_h("a", 8, 1))
+    clock.now += 5.0  # silent for exactly quiet_s: the restart may take over
+    assert rf.accept(_h("a", 9, 1))
+    rf.release("b")  # unknown sender: nothing to release
+
+
+def test_max_epoch_step_bounds_unauthenticated_leaps_only() -> None:
+    rf = ReplayFilter(max_epoch_step=16)
+    assert rf.accept(_h("a", 3, 1))
+    rf.release("a")
+    assert rf.check(_h("a", 20, 1)) == "epoch_jump"  # 17 ahead
+    assert rf.accept(_h("a", 19, 1))  # exactly 16 ahead
+    assert rf.accept(_h("a", 2**62, 1), authenticated=True)  # a signature vouches for it
 
 
 def test_replay_filter_is_per_sender() -> None:
@@ -436,14 +478,24 @@ def test_keys_follow_the_design_layout() -> None:
     assert k.assign() == "aw/alpha/cmdr/assign/*"
     assert k.sim_perception("uav1") == "aw/alpha/sim/perception/uav1"
     assert k.sim_reward("uav1") == "aw/alpha/sim/reward/uav1"
-    assert k.sim_command("uav1") == "aw/alpha/sim/command/uav1"
+    assert k.sim_command("uav1") == "aw/alpha/uav/uav1/sim/command"
+    assert k.sim_command() == "aw/alpha/uav/*/sim/command"
     assert k.sim_episode == "aw/alpha/sim/episode"
 
 
 def test_every_uav_key_sits_under_its_own_prefix() -> None:
     k = Keys("s")
     own = "aw/s/uav/uav1/"
-    for key in (k.state("uav1"), k.report("uav1"), k.experience("uav1"), k.inbox("uav1", "x")):
+    for key in (
+        k.state("uav1"),
+        k.report("uav1"),
+        k.experience("uav1"),
+        k.inbox("uav1", "x"),
+        k.sim_command("uav1"),
+    ):
         assert key.startswith(own)
+        assert k.uav_of(key) == "uav1"
     assert last_chunk(k.inbox("uav2", "uav1")) == "uav1"
-    assert last_chunk(k.sim_command("uav3")) == "uav3"
+    assert k.uav_of(k.context) is None
+    assert k.uav_of("aw/other/uav/uav1/state") is None
+    assert k.uav_of("aw/s/uav/") is None
