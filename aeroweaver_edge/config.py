@@ -129,6 +129,12 @@ class MeshConfig(_Section):
         for field_name in ("listen", "connect"):
             for i, ep in enumerate(getattr(self, field_name)):
                 where = f"{field_name}[{i}] {ep!r}"
+                proto, _, address = ep.partition("/")
+                if not proto or not address:
+                    raise ValueError(
+                        f"mesh.{where}: not a Zenoh endpoint (expected proto/address, "
+                        "e.g. tcp/127.0.0.1:7447 or tls/10.0.0.2:7447)"
+                    )
                 if self.security is not None and not endpoint_is_secure(ep):
                     raise ValueError(
                         f"{where}: with [mesh.security] every endpoint is tls/ or quic/"

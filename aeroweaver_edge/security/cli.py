@@ -189,7 +189,7 @@ def cmd_keys_show(args: argparse.Namespace) -> int:
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from aeroweaver_edge.cli import _run
+    from aeroweaver_edge.cli import Stopped, _run
     from aeroweaver_edge.security.router import RouterError, check_router_config, run_router
 
     try:
@@ -200,6 +200,6 @@ def cmd_router(args: argparse.Namespace) -> int:
         _run(run_router(conf))
     except RouterError as exc:
         return _fail(f"router: {exc}")
-    except (KeyboardInterrupt, asyncio.CancelledError):
-        return 0
+    except (KeyboardInterrupt, asyncio.CancelledError, Stopped):
+        return 0  # SIGTERM/SIGINT is how a router is stopped (systemctl stop): not a failure
     return 0

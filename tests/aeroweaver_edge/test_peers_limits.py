@@ -26,7 +26,7 @@ async def pair(
     for uav in ("a", "b"):
         mesh = await net.open(uav)
         link = PeerLink(mesh, KEYS, uav, HeaderFactory(uav, epoch=epoch), 55.0,
-                        limits if uav == "b" else None)  # fmt: skip
+                        limits=limits if uav == "b" else None, track_neighbours=True)  # fmt: skip
         await link.start()
         out.append(link)
     a, b = out
@@ -42,7 +42,9 @@ async def pair(
 
 def msg(sender: str, epoch: int, seq: int, *, round_: int = 1, body: str = "") -> InboxMessage:
     h = Header(sender=sender, epoch=epoch, seq=seq, stamp=0.0)
-    return InboxMessage(h=h, to="b", round=round_, kind="status", body={"t": body} if body else {})
+    return InboxMessage(
+        h=h, to="b", round=round_, kind="status", body={"t": body} if body else {}, sender_pos=HERE
+    )
 
 
 async def settled(link: PeerLink, n: int) -> None:
@@ -69,7 +71,7 @@ async def test_restart_after_leaving_is_accepted_and_old_epoch_refused(zenoh_net
     await a.aclose()  # the session ends: b sees the token go
     assert await eventually(lambda: "a" not in b.roster)
     mesh = await zenoh_net.open("a")
-    a2 = PeerLink(mesh, KEYS, "a", HeaderFactory("a", epoch=2), 55.0)
+    a2 = PeerLink(mesh, KEYS, "a", HeaderFactory("a", epoch=2), 55.0, track_neighbours=True)
     await a2.start()
     assert await b.wait_for_peers({"a"}, 3.0)
     assert await a2.wait_for_peers({"b"}, 3.0)
@@ -112,16 +114,17 @@ async def test_pending_inbox_is_bounded(zenoh_net: ZenohNet) -> None:
     for seq in range(n + 1, n + 101):  # a flood inside the window: capped per sender
         mallory.put(KEYS.inbox("b", "a"), msg("a", 1, seq, round_=2), block=True)
     await settled(b, n + 100)
-    assert len(b._pending) == 32
-    assert len(b._pending_bytes) == 32
+    assert b.inbox.pending == 32
+    assert len(b.inbox._pending_bytes) == 32
     assert b.stats.rejected["inbox_full_sender"] == 100 - 30
     assert await b.collect_inbox(timeout_s=0.0, max_round=1) == []  # all for later rounds
     b.publish_beacon(2, HERE, STILL)
     assert len(await b.collect_inbox(timeout_s=0.0, max_round=2)) == 31
+    b.publish_beacon(3, HERE, STILL)
     [last] = await b.collect_inbox(timeout_s=0.0, max_round=3)
     assert last.round == 3
-    assert b._pending == []
-    assert b._pending_bytes == {}
+    assert b.inbox.pending == 0
+    assert b.inbox._pending_bytes == {}
 
 
 async def test_pending_bytes_are_bounded_and_episode_leftovers_dropped(zenoh_net: ZenohNet) -> None:
@@ -132,12 +135,12 @@ async def test_pending_bytes_are_bounded_and_episode_leftovers_dropped(zenoh_net
     await settled(b, 10)
     assert b.stats.received == 6  # 6 x ~3.1 kB fit in 20 kB, the 7th does not
     assert b.stats.rejected == {"inbox_full_bytes": 4}
-    assert sum(b._pending_bytes.values()) <= 20_000
+    assert sum(b.inbox._pending_bytes.values()) <= 20_000
     # A new episode restarts rounds at 0: last episode's round-2 leftovers are not kept.
     b.publish_beacon(0, HERE, STILL)
     assert await b.collect_inbox(timeout_s=0.0, max_round=-1) == []
     assert b.stats.rejected["future_round"] == 6
-    assert b._pending == []
+    assert b.inbox.pending == 0
 
 
 async def test_beacon_must_be_physically_plausible(zenoh_net: ZenohNet) -> None:

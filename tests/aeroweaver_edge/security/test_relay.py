@@ -135,10 +135,13 @@ async def test_signed_restart_epoch_is_taken_at_once(secure_net: SecureNet) -> N
     key = K.inbox("uav1", "uav0")
     for epoch, seq in ((2, 1), (1, 99)):
         h = Header(sender="uav0", epoch=epoch, seq=seq, stamp=0.0)
-        a._mesh.put(key, InboxMessage(h=h, to="uav1", round=1, kind="status"), block=True)
+        forged = InboxMessage(h=h, to="uav1", round=1, kind="status", sender_pos=HERE)
+        a._mesh.put(key, forged, block=True)
     control = await a.send("uav1", "status", {}, round=1)  # epoch 1 again: now too old
     h = Header(sender="uav0", epoch=2, seq=2, stamp=0.0)
-    a._mesh.put(key, InboxMessage(h=h, to="uav1", round=1, kind="done"), block=True)
+    a._mesh.put(
+        key, InboxMessage(h=h, to="uav1", round=1, kind="done", sender_pos=HERE), block=True
+    )
     assert await eventually(lambda: b.stats.received + b.stats.rejected.total() == 5, 5.0)
     got = await b.collect_inbox(timeout_s=0.0)
     assert [(m.h.epoch, m.h.seq) for m in got] == [(2, 1), (2, 2)]

@@ -34,14 +34,14 @@ async def test_ephemeral_swarm_runs_secured_peer_links(tmp_path: Path) -> None:
             headers = await asyncio.to_thread(boot_headers, cfgs[mesh.node_id], mesh.node_id)
             assert headers.epoch == 1  # first start of this identity
             link = PeerLink(mesh, keys, mesh.node_id, headers, 55.0,
-                            peer_limits(pki, SafetyConfig(), 0.5))  # fmt: skip
+                            limits=peer_limits(pki, SafetyConfig(), 0.5))  # fmt: skip
             await link.start()
             links[mesh.node_id] = link
         for uav, link in links.items():
             assert await link.wait_for_peers(set(uavs) - {uav}, 5.0)
             link.publish_beacon(1, (0.0, 0.0, -5.0), (0.0, 0.0, 0.0))
         a, b = links["uav0"], links["uav1"]
-        ref = await a.send("uav1", "status", {"ok": True}, round=1, min_round=1, wait_s=5.0)
+        ref = await a.send("uav1", "status", {"ok": True}, round=1)
         assert ref is not None
         [msg] = await b.collect_inbox([ref], timeout_s=5.0)
         assert msg.body == {"ok": True}
