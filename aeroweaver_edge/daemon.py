@@ -19,6 +19,7 @@ from aeroweaver_edge.mission_state import MissionState
 from aeroweaver_edge.observation import MissionView
 from aeroweaver_edge.ports import Clock, Perception, RewardSource, Selector, Vehicle
 from aeroweaver_edge.safety_gate import SafetyGate
+from aeroweaver_edge.vehicle.phases import ApprovalPredicate, FlightPhases, default_approval
 from aeroweaver_edge.wire import (
     Assignment,
     ExperienceRecord,
@@ -77,6 +78,7 @@ class UavDaemon:
         sensing_radius_m: float = 45.0,
         round_s: float = 0.5,
         on_round: Callable[[RoundOutcome], Awaitable[None]] | None = None,
+        approve: ApprovalPredicate = default_approval,
     ) -> None:
         from aeroweaver_edge.peers import PeerLink
 
@@ -94,19 +96,31 @@ class UavDaemon:
         self._last_reward: float | None = None
         self._warmed: tuple[str, str] | None = None
         self._tasks: list[asyncio.Task[Any]] = []
+        # Flight phases (preflight, arm, take off, offboard, mission, land/return) wrap the
+        # Vehicle port; the round flies through them. ``approve`` gates vehicle actions.
+        self.phases = FlightPhases(
+            ports.vehicle,
+            uav=cfg.uav,
+            altitude_m=altitude_m,
+            end_action=cfg.vehicle.end_action,
+            on_link_loss=cfg.vehicle.on_link_loss,
+            takeoff_timeout_s=cfg.vehicle.takeoff_timeout_s,
+            approve=approve,
+        )
         self.rc = RoundContext(
             uav=cfg.uav,
             uav_index=uav_index,
             registry=registry,
             selector=selector,
             gate=SafetyGate(cfg.safety, horizon_s=round_s),
-            vehicle=ports.vehicle,
+            vehicle=self.phases,
             perception=ports.perception,
             link=self.link,
             agent=cfg.agent,
             memory=memory,
             altitude_m=altitude_m,
             sensing_radius_m=sensing_radius_m,
+            act=self.phases.act,
         )
 
     async def _pump_context(self, sub: Subscription[MissionContext]) -> None:
@@ -188,6 +202,11 @@ class UavDaemon:
                 if tick is None:
                     break
                 view = self.mission.view()
+                # Flight phases: launch once a mission is assigned; land/return when it ends.
+                if view is not None:
+                    await self.phases.launch()
+                elif self.phases.flying:
+                    await self.phases.finish("mission ended")
                 await self._warm(view)
                 out = await run_round(self.rc, tick, view)
                 await self.ports.clock.finish(tick, out.sent)
@@ -197,11 +216,9 @@ class UavDaemon:
                 if self._on_round is not None:
                     await self._on_round(out)
         finally:
-            # Whatever ends the daemon (run over, Ctrl-C, SIGTERM, a bug), its body holds.
-            try:
-                await self.ports.vehicle.hold()
-            except Exception:
-                log.exception("%s: hold on shutdown failed", self.uav)
+            # Whatever ends the daemon (run over, Ctrl-C, SIGTERM, a bug), its body lands or
+            # returns if flying (vehicle.end_action), else holds. Never raises.
+            await self.phases.finish("daemon stopping")
             await cancel_all(self._tasks)
             await self.link.aclose()
         return self.stats
