@@ -66,9 +66,10 @@ def _ports(
 
         link = SimLink(mesh, Keys(cfg.swarm), cfg.uav, headers)
         return DaemonPorts(link, link, link, link), link.start, link.aclose
-    raise ConfigError(
-        f"vehicle.backend: {cfg.vehicle.backend!r} is not available in this release; use 'sim'"
-    )
+    # flight: a real link (mavlink / mavsdk), in the field or against the simulated world.
+    from aeroweaver_edge.vehicle.flight_ports import flight_ports
+
+    return flight_ports(cfg, mesh, headers)
 
 
 async def run_daemon(
@@ -110,6 +111,9 @@ async def run_daemon(
             round_s=cfg.round_s,
             on_round=on_round,
         )
+        attach = getattr(ports.perception, "attach", None)
+        if attach is not None:  # field perception: peers come from the daemon's beacons
+            attach(lambda: daemon.link.neighbours)
         if on_ready is not None:
             on_ready(daemon)
         return await daemon.run()

@@ -67,6 +67,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         beta=args.beta,
         memory_dir=Path(args.memory_dir) if args.memory_dir else None,
         deadline_s=args.deadline,
+        link=args.link,
+        personality=args.personality,
     )
     view = None if args.quiet else LiveView()
     try:
@@ -203,6 +205,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--deadline", type=float, default=30.0, help="seconds a round may take")
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
     s.add_argument("--quiet", action="store_true", help="no per-round view")
+    s.add_argument(
+        "--link", choices=["sim", "mavlink", "mavsdk"], default="sim",
+        help="vehicle link: in-process (sim) or real MAVLink bytes to emulated autopilots",
+    )  # fmt: skip
+    s.add_argument("--personality", choices=["px4", "ardupilot"], default="px4",
+                   help="emulated autopilot type (with --link mavlink)")  # fmt: skip
     _add_llm_flags(s)
     s.set_defaults(func=cmd_sim)
 

@@ -145,6 +145,28 @@ class VehicleConfig(_Section):
         return self
 
 
+class FieldPoint(_Section):
+    """A known point of interest for a daemon flying without a simulator."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    id: str = Field(min_length=1, max_length=64)
+    kind: Literal["landmark", "waypoint"] = "waypoint"
+    north: float = Field(ge=-10_000, le=10_000)
+    east: float = Field(ge=-10_000, le=10_000)
+
+
+class FieldConfig(_Section):
+    """Rounds on the wall clock and perception from telemetry + peers' beacons (no sim)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    round_deadline_s: float = Field(default=25.0, gt=0)  # an LLM round may take this long
+    sensing_radius_m: float = Field(default=45.0, gt=0)
+    beacon_max_age_s: float = Field(default=3.0, gt=0)  # by local receipt time
+    points: list[FieldPoint] = Field(default_factory=list, max_length=256)
+
+
 class UavConfig(_Section):
     """One daemon: ``aeroweaver daemon --config uav.toml``."""
 
@@ -157,6 +179,7 @@ class UavConfig(_Section):
     agent: AgentConfig = AgentConfig()
     safety: SafetyConfig = SafetyConfig()
     vehicle: VehicleConfig = VehicleConfig()
+    field: FieldConfig = FieldConfig()
 
     @field_validator("uav")
     @classmethod

@@ -37,6 +37,7 @@ from aeroweaver_edge.wire import (
 
 if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.sim.emulator.bridge import EmulatorBridge
 
 log = logging.getLogger(__name__)
 
@@ -69,8 +70,11 @@ class WorldRunner:
         cfg: SimConfig,
         *,
         on_round: Callable[[RoundLog], Awaitable[None]] | None = None,
+        vehicles: EmulatorBridge | None = None,
     ) -> None:
         self.mesh = mesh
+        # flight link (sim --link mavlink|mavsdk): emulated autopilots fly the bodies
+        self.vehicles = vehicles
         self.keys = Keys(swarm)
         self.task = task
         self.cfg = cfg
@@ -155,6 +159,8 @@ class WorldRunner:
     async def run_episode(self, episode: int) -> EpisodeResult:
         rng = np.random.default_rng(self.cfg.seed + episode)
         world = self.task.build_world(rng, self.cfg)
+        if self.vehicles is not None:  # flight link: the emulated autopilots fly this world
+            self.vehicles.attach(world)
         ep = Episode(self.task, world, self.cfg.max_rounds)
         self._publish_episode(episode, "start")
         inbox: dict[str, list[MsgRef]] = defaultdict(list)
@@ -194,6 +200,10 @@ class WorldRunner:
                 for ref in cmd.sent:
                     if ref.to:
                         inbox[ref.to].append(ref)
+            if self.vehicles is not None:
+                # flight link: the bodies move as the autopilots were told over MAVLink; wait
+                # until each declared setpoint has arrived, then hold only the silent UAVs.
+                orders = await self.vehicles.settle(commands, world.uav_ids)
             ep.apply(orders)
             res = ep.advance()
             for uav in world.uav_ids:

@@ -61,6 +61,8 @@ class SwarmOptions:
     mission_text: str | None = None
     top_k: int = 8  # task skills activated per UAV by the Commander (plus hold_position)
     swarm: str = "sim"
+    link: Literal["sim", "mavlink", "mavsdk"] = "sim"  # flight: real MAVLink to emulated autopilots
+    personality: str = "px4"  # the emulated autopilots' (with a mavlink/mavsdk link)
 
 
 @dataclass
@@ -317,7 +319,17 @@ async def run_swarm(
             if on_round is not None:
                 await on_round(log, board_ref["board"])
 
-        runner = WorldRunner(world_mesh, opts.swarm, task, sim_cfg, on_round=round_hook)
+        linked = None  # flight: emulated autopilots behind real MAVLink (docs/flight.md)
+        if opts.link != "sim":
+            from aeroweaver_edge.sim.emulator.swarm_link import emulated_swarm
+
+            linked = await stack.enter_async_context(
+                emulated_swarm(opts.link, task, sim_cfg, opts.personality)
+            )
+        runner = WorldRunner(
+            world_mesh, opts.swarm, task, sim_cfg, on_round=round_hook,
+            vehicles=linked.bridge if linked else None,
+        )  # fmt: skip
         await runner.start()
         stack.push_async_callback(runner.aclose)
         commander = Commander(cmdr_mesh, opts.swarm)
@@ -339,6 +351,7 @@ async def run_swarm(
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
                     share_experience=opts.share_experience,
                 ),
+                **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
             for u in uavs
         ]
@@ -380,6 +393,8 @@ async def run_swarm(
             commander.end_mission("operator stop")
             runner.shutdown()
             raise
+        if linked is not None:
+            linked.bridge.detach()  # landing after the run flies on the emulator's own clock
         runner.shutdown()
         await daemons.stop()
         await asyncio.sleep(0.2)  # last reports

@@ -112,6 +112,13 @@ class MavlinkVehicle:
     # -- lifecycle ------------------------------------------------------------------------
 
     async def start(self) -> None:
+        try:
+            await self._start()
+        except BaseException:
+            await self.aclose()  # no socket or task outlives a failed start
+            raise
+
+    async def _start(self) -> None:
         cfg = self.cfg
         if cfg.signing_key:
             key = load_key(cfg.signing_key)

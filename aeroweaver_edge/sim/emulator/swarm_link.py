@@ -1,0 +1,74 @@
+"""``aeroweaver sim --link mavlink|mavsdk``: emulated autopilots for a simulated swarm.
+
+Builds episode 0's world ahead of the runner (the same seeded layout), so every vehicle
+sits on the ground at its spawn point, arms and takes off there; then the runner attaches
+each episode's world through the bridge. Vehicle i is system id i+1; each daemon listens
+on its own free UDP port (``udpin``), which its emulated autopilot sends to.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from aeroweaver_edge.config import SimConfig, VehicleConfig
+from aeroweaver_edge.sim.emulator.bridge import EmulatorBridge
+from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
+from aeroweaver_edge.sim.tasks.base import Task
+from aeroweaver_edge.vehicle.mavlink.udp import UdpEndpoint, UdpUrl
+
+TIME_SCALE = 5.0  # take-off and landing run 5x faster than real time (physics is lockstep)
+
+
+async def _free_udp_ports(n: int) -> list[int]:
+    eps = [
+        await UdpEndpoint.open(UdpUrl("udpin", "127.0.0.1", 0), lambda d, a: None) for _ in range(n)
+    ]
+    try:
+        return [ep.local_port for ep in eps]
+    finally:
+        for ep in eps:
+            ep.close()
+
+
+@dataclass(frozen=True)
+class LinkedSwarm:
+    bridge: EmulatorBridge
+    vehicles: dict[str, VehicleConfig]  # per UAV: the daemon's vehicle section
+
+
+@contextlib.asynccontextmanager
+async def emulated_swarm(
+    link: str, task: Task, cfg: SimConfig, personality: str = "px4"
+) -> AsyncIterator[LinkedSwarm]:
+    uavs = task.uav_ids
+    world = task.build_world(np.random.default_rng(cfg.seed + 0), cfg)
+    ports = await _free_udp_ports(len(uavs))
+    opts = EmulatorOptions(
+        uavs=len(uavs),
+        personality=personality,
+        local_base=0,
+        remote_ports=ports,
+        time_scale=TIME_SCALE,
+        seed=cfg.seed,
+    )
+    host = EmulatorHost(opts, world=world, uav_ids=uavs)
+    await host.start()
+    try:
+        vehicles = {
+            u: VehicleConfig(
+                backend="mavlink" if link == "mavlink" else "mavsdk",
+                url=f"udpin://127.0.0.1:{port}",
+                sysid=i + 1,
+                personality=personality if link == "mavlink" else "auto",  # type: ignore[arg-type]
+                altitude_m=cfg.altitude_m,
+                sim_world=True,
+            )
+            for i, (u, port) in enumerate(zip(uavs, ports, strict=True))
+        }
+        yield LinkedSwarm(EmulatorBridge(host), vehicles)
+    finally:
+        await host.aclose()
