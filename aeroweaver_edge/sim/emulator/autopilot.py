@@ -23,7 +23,6 @@ from aeroweaver_edge.vehicle.mavlink.geo import DEFAULT_ORIGIN, GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.personality import (
     PARAM_INT32,
     PARAM_REAL32,
-    POSITION_ONLY,
     Personality,
 )
 
@@ -35,6 +34,8 @@ ON_GROUND, IN_AIR = R.MAV_LANDED_STATE_ON_GROUND, R.MAV_LANDED_STATE_IN_AIR
 TAKING_OFF, LANDING = R.MAV_LANDED_STATE_TAKEOFF, R.MAV_LANDED_STATE_LANDING
 OFFBOARD_STREAM_S = 0.5  # PX4 enters offboard only with a setpoint this recent
 DUPLICATE_WINDOW_S = 5.0
+IGNORE_POSITION = 0x7  # type_mask bits: x, y, z ignored
+IGNORE_VELOCITY = 0x38  # vx, vy, vz ignored
 FORCE_DISARM = 21196.0
 
 # Parameter name -> (value, type). PX4's COM_OBL_RC_ACT factory default is 0 (Position
@@ -315,12 +316,15 @@ class EmulatedAutopilot:
     def _on_setpoint(self, msg: Message) -> None:
         if msg.coordinate_frame != R.MAV_FRAME_LOCAL_NED:
             return
-        if (msg.type_mask & POSITION_ONLY) == POSITION_ONLY or (msg.type_mask & 0x7) == 0x7:
+        mask = int(msg.type_mask)
+        if mask & IGNORE_POSITION == IGNORE_POSITION:
             kind = "velocity"
             sp = (float(msg.vx), float(msg.vy), float(msg.vz))
-        else:
+        elif mask & IGNORE_VELOCITY == IGNORE_VELOCITY:
             kind = "position"
             sp = (float(msg.x), float(msg.y), float(msg.z))
+        else:
+            return  # position + velocity feed-forward: not modelled
         if not all(math.isfinite(v) for v in sp):
             return
         self.setpoint = (kind, *sp)
@@ -925,6 +929,7 @@ class EmulatedAutopilot:
                 | R.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
                 | R.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | R.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+                | R.MAV_PROTOCOL_CAPABILITY_MISSION_INT
                 | R.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE * (self.p.name == "px4")
             )
             self._send(
