@@ -90,3 +90,45 @@ async def until(cond: Callable[[], bool], timeout_s: float = 5.0, what: str = "c
             raise AssertionError(f"{what} not reached within {timeout_s} s")
         await asyncio.sleep(0.01)
     return time.monotonic() - started
+
+
+class ThreadedEmulator:
+    """An emulator on its own thread and event loop, so it keeps ticking (and its
+    failsafes keep firing) while the test's loop is deliberately blocked."""
+
+    def __init__(self, opts: EmulatorOptions, faults: Sequence[Faults] | None = None) -> None:
+        import threading
+
+        self.opts = opts
+        self._faults = faults
+        self.host: EmulatorHost | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._ready = threading.Event()
+        self._stop: asyncio.Event | None = None
+        self._thread = threading.Thread(target=self._main, name="emulator", daemon=True)
+
+    def _main(self) -> None:
+        async def run() -> None:
+            self._loop = asyncio.get_running_loop()
+            self._stop = asyncio.Event()
+            self.host = EmulatorHost(self.opts, faults=self._faults)
+            await self.host.start()
+            self._ready.set()
+            try:
+                await self._stop.wait()
+            finally:
+                await self.host.aclose()
+
+        asyncio.run(run())
+
+    def __enter__(self) -> EmulatorHost:
+        self._thread.start()
+        if not self._ready.wait(10):
+            raise RuntimeError("emulator thread did not start")
+        assert self.host is not None
+        return self.host
+
+    def __exit__(self, *exc: object) -> None:
+        if self._loop is not None and self._stop is not None:
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(10)

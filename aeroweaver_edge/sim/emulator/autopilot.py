@@ -173,7 +173,7 @@ class EmulatedAutopilot:
         self.t0 = time.monotonic()
         self.armed = False
         self.mode = "AUTO.LOITER" if personality.name == "px4" else "STABILIZE"
-        self.landed = ON_GROUND
+        self._landed = ON_GROUND
         self.alt = 0.0  # metres above home
         self.vz = 0.0
         self.climb_to = 0.0
@@ -198,6 +198,16 @@ class EmulatedAutopilot:
         self._guided_stopped = False
 
     # -- helpers ---------------------------------------------------------------------------
+
+    @property
+    def landed(self) -> int:
+        return self._landed
+
+    @landed.setter
+    def landed(self, value: int) -> None:
+        if value != self._landed:
+            self._landed = value
+            self._send_message(R.MAVLINK_MSG_ID_EXTENDED_SYS_STATE)  # at once, like PX4
 
     def param(self, name: str) -> float:
         return float(self.params[name][0])

@@ -61,7 +61,7 @@ TELEMETRY = {  # message id -> interval (us) we ask for; PX4 streams these anywa
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 1_000_000,
 }
 PRESTREAM_S = 0.5  # zero setpoints streamed before offboard is requested (PX4 needs > 2 Hz)
-MODE_CONFIRM_S = 1.5
+MODE_CONFIRM_S = 3.0  # three 1 Hz heartbeats: a lost one must not fail the command
 
 
 @dataclass
