@@ -193,6 +193,7 @@ class EmulatedAutopilot:
         self._due: dict[int, float] = {}
         self._dup: dict[tuple[int, int, int], tuple[tuple[float, ...], float, int]] = {}
         self._upload: _Upload | None = None
+        self._last_cmd: dict[tuple[int, int], int] = {}  # last command run, per sender
         self._slow: list[tuple[float, int, tuple[int, int]]] = []  # (due, command, src)
         self._last_tick = time.monotonic()
         self._guided_stopped = False
@@ -401,6 +402,7 @@ class EmulatedAutopilot:
         if (
             rec.confirmation > 0
             and cached is not None
+            and self._last_cmd.get(rec.src) == rec.command  # nothing else ran since
             and _same(cached[0], rec.params)
             and rec.t - cached[1] <= DUPLICATE_WINDOW_S
         ):
@@ -413,6 +415,7 @@ class EmulatedAutopilot:
         delay = self.faults.slow_commands.get(rec.command)
         result = self._execute(rec, msg)
         self._dup[key] = (rec.params, rec.t, result)
+        self._last_cmd[rec.src] = rec.command
         self.log.append(CommandRecord(**{**rec.__dict__, "result": result}))
         if delay is not None and result == ACCEPTED:
             self._ack(rec.command, R.MAV_RESULT_IN_PROGRESS, rec.src, progress=0)
