@@ -15,9 +15,9 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 
+from aeroweaver_edge.observation import VehicleState
 from aeroweaver_edge.ports import RewardEvent, RoundTick, Vehicle
 from aeroweaver_edge.wire import Entity, MsgRef, StateBeacon
-from aeroweaver_edge.observation import VehicleState
 
 
 class WallClock:
@@ -63,8 +63,10 @@ class FieldPerception:
         sensing_radius_m: float = 45.0,
         points: Sequence[Entity] = (),
         beacon_max_age_s: float = 3.0,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.vehicle = vehicle
+        self._clock = clock
         self.sensing_radius_m = sensing_radius_m
         self.points = list(points)
         self.beacon_max_age_s = beacon_max_age_s
@@ -102,7 +104,7 @@ class FieldPerception:
         entities = [p for p in self.points if near(p.pos)]
         entities += [
             Entity(id=b.uav, kind="uav", pos=b.pos, vel=b.vel, role=b.role)
-            for b in sorted(self._fresh_peers(time.monotonic()), key=lambda b: b.uav)
+            for b in sorted(self._fresh_peers(self._clock()), key=lambda b: b.uav)
             if near(b.pos)
         ]
         return own, entities
