@@ -14,6 +14,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from aeroweaver_edge.config import ConfigError, LLMConfig, UavConfig, load_config
+from aeroweaver_edge.vehicle.errors import VehicleError
+from aeroweaver_edge.vehicle.mavlink.signing import SigningError
 from commander.mission_parser import MissionParseError
 
 T = TypeVar("T")
@@ -169,7 +171,25 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import memory
 
         return memory.main(["--records", str(args.records)])
+    if args.what == "mavlink":  # flight link: setpoint rate and command round trip
+        from aeroweaver_edge.bench import mavlink
+
+        return mavlink.main(["--seconds", str(args.seconds)])
     raise SystemExit(f"unknown benchmark {args.what!r}")
+
+
+def cmd_signing_key(args: argparse.Namespace) -> int:
+    """flight: provision a MAVLink 2 signing key file (0600) for one vehicle."""
+    from aeroweaver_edge.vehicle.mavlink.signing import write_key
+
+    path = Path(args.path)
+    if path.exists() and not args.force:
+        print(f"aeroweaver: {path} exists; use --force to replace it", file=sys.stderr)
+        return 2
+    write_key(path)
+    print(f"wrote a 32-byte signing key to {path} (mode 0600); install the same key on the "
+          "autopilot over a wired link, never over radio")  # fmt: skip
+    return 0
 
 
 def _add_llm_flags(p: argparse.ArgumentParser) -> None:
@@ -242,9 +262,19 @@ def build_parser() -> argparse.ArgumentParser:
     pr.set_defaults(func=cmd_probe)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=["memory"])
+    b.add_argument("what", choices=["memory", "mavlink"])
     b.add_argument("--records", type=int, default=10_000)
+    b.add_argument("--seconds", type=float, default=5.0, help="mavlink: streaming time")
     b.set_defaults(func=cmd_bench)
+
+    # flight: emulated autopilots and signing keys (docs/flight.md)
+    from aeroweaver_edge.sim.emulator.cli import add_parser as add_emulator
+
+    add_emulator(sub)
+    k = sub.add_parser("signing-key", help="create a MAVLink 2 signing key file (0600)")
+    k.add_argument("path")
+    k.add_argument("--force", action="store_true", help="replace an existing key file")
+    k.set_defaults(func=cmd_signing_key)
     return p
 
 
@@ -259,6 +289,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except ConfigError as exc:
         print(f"aeroweaver: config error: {exc}", file=sys.stderr)
+        return 2
+    except VehicleError as exc:  # flight: the vehicle link could not be brought up
+        print(f"aeroweaver: vehicle: {exc}", file=sys.stderr)
+        return 1
+    except SigningError as exc:
+        print(f"aeroweaver: signing: {exc}", file=sys.stderr)
         return 2
     except MissionParseError as exc:
         print(f"aeroweaver: cannot understand the mission: {exc}", file=sys.stderr)

@@ -90,6 +90,7 @@ class RunSummary:
     tokens_by_agent: dict[str, int] = field(default_factory=dict)
     tokens_by_role: dict[str, int] = field(default_factory=dict)
     decision_latency_s: dict[str, float] = field(default_factory=dict)
+    link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -122,6 +123,7 @@ class RunSummary:
             "llm_calls": self.llm_calls,
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
+            **({"link": self.link} if self.link else {}),
         }
 
 
@@ -394,6 +396,7 @@ async def run_swarm(
             runner.shutdown()
             raise
         if linked is not None:
+            summary.link = linked.report(opts.link)
             linked.bridge.detach()  # landing after the run flies on the emulator's own clock
         runner.shutdown()
         await daemons.stop()

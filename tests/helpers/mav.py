@@ -13,7 +13,11 @@ from typing import Any
 from aeroweaver_edge.config import SafetyConfig, VehicleConfig
 from aeroweaver_edge.sim.emulator.autopilot import Faults
 from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
+from aeroweaver_edge.sim.emulator.thread import ThreadedEmulator
 from aeroweaver_edge.vehicle.mavlink.backend import MavlinkVehicle
+
+
+__all__ = ["FAST", "ThreadedEmulator", "emulated", "free_udp_ports", "until", "vehicle_config"]
 
 
 def free_udp_ports(n: int) -> list[int]:
@@ -56,12 +60,11 @@ async def emulated(
     start: bool = True,
 ) -> AsyncIterator[tuple[EmulatorHost, list[MavlinkVehicle]]]:
     """``n`` emulated vehicles and a started backend for each (udpin on a free port)."""
-    ports = free_udp_ports(n)
     opts = EmulatorOptions(
         uavs=n,
         personality=personality,
         local_base=0,
-        remote_ports=ports,
+        remote_ports=[9] * n,
         time_scale=time_scale,
         params=params or {},
         signing_keys=signing_keys,
@@ -69,10 +72,14 @@ async def emulated(
     host = EmulatorHost(opts, faults=faults)
     await host.start()
     backends = [
-        MavlinkVehicle(vehicle_config(p, **(vehicle or {})), safety or SafetyConfig(), f"uav{i}")
-        for i, p in enumerate(ports)
+        MavlinkVehicle(vehicle_config(0, **(vehicle or {})), safety or SafetyConfig(), f"uav{i}")
+        for i in range(n)
     ]
     try:
+        for i, b in enumerate(backends):
+            await b.link.open()  # bound first: the emulator sends to a port that is ours
+            host.retarget(i, b.link.local_port)
+            b.cfg = b.cfg.model_copy(update={"url": f"udpin://127.0.0.1:{b.link.local_port}"})
         if start:
             await asyncio.gather(*(b.start() for b in backends))
         yield host, backends
@@ -90,45 +97,3 @@ async def until(cond: Callable[[], bool], timeout_s: float = 5.0, what: str = "c
             raise AssertionError(f"{what} not reached within {timeout_s} s")
         await asyncio.sleep(0.01)
     return time.monotonic() - started
-
-
-class ThreadedEmulator:
-    """An emulator on its own thread and event loop, so it keeps ticking (and its
-    failsafes keep firing) while the test's loop is deliberately blocked."""
-
-    def __init__(self, opts: EmulatorOptions, faults: Sequence[Faults] | None = None) -> None:
-        import threading
-
-        self.opts = opts
-        self._faults = faults
-        self.host: EmulatorHost | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._ready = threading.Event()
-        self._stop: asyncio.Event | None = None
-        self._thread = threading.Thread(target=self._main, name="emulator", daemon=True)
-
-    def _main(self) -> None:
-        async def run() -> None:
-            self._loop = asyncio.get_running_loop()
-            self._stop = asyncio.Event()
-            self.host = EmulatorHost(self.opts, faults=self._faults)
-            await self.host.start()
-            self._ready.set()
-            try:
-                await self._stop.wait()
-            finally:
-                await self.host.aclose()
-
-        asyncio.run(run())
-
-    def __enter__(self) -> EmulatorHost:
-        self._thread.start()
-        if not self._ready.wait(10):
-            raise RuntimeError("emulator thread did not start")
-        assert self.host is not None
-        return self.host
-
-    def __exit__(self, *exc: object) -> None:
-        if self._loop is not None and self._stop is not None:
-            self._loop.call_soon_threadsafe(self._stop.set)
-        self._thread.join(10)

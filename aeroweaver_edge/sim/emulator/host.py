@@ -161,6 +161,10 @@ class EmulatorHost:
         """The runner is done: the host steps the (last) world on the wall clock again."""
         self.free_running = True
 
+    def retarget(self, i: int, port: int) -> None:
+        """Send vehicle ``i``'s traffic to ``port`` (where its companion now listens)."""
+        self._fixed[i][0] = (self.opts.host, port)
+
     def vehicle(self, uav: str) -> EmulatedAutopilot:
         return self.vehicles[self.ids.index(uav)]
 

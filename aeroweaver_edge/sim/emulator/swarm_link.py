@@ -9,8 +9,10 @@ on its own free UDP port (``udpin``), which its emulated autopilot sends to.
 from __future__ import annotations
 
 import contextlib
+from collections import Counter
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -18,6 +20,7 @@ from aeroweaver_edge.config import SimConfig, VehicleConfig
 from aeroweaver_edge.sim.emulator.bridge import EmulatorBridge
 from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
 from aeroweaver_edge.sim.tasks.base import Task
+from aeroweaver_edge.vehicle.mavlink.commands import command_name
 from aeroweaver_edge.vehicle.mavlink.udp import UdpEndpoint, UdpUrl
 
 TIME_SCALE = 5.0  # take-off and landing run 5x faster than real time (physics is lockstep)
@@ -39,6 +42,27 @@ class LinkedSwarm:
     bridge: EmulatorBridge
     vehicles: dict[str, VehicleConfig]  # per UAV: the daemon's vehicle section
 
+    def report(self, link: str) -> dict[str, Any]:
+        """What crossed the link, per vehicle (for the run summary)."""
+        host = self.bridge.host
+        out: dict[str, Any] = {
+            "link": link,
+            "personality": host.opts.personality,
+            "settle_rounds": self.bridge.stats.rounds,
+            "settle_mismatches": self.bridge.stats.mismatches,
+            "settle_wait_s_max": round(self.bridge.stats.wait_s_max, 4),
+            "vehicles": {},
+        }
+        for ap in host.vehicles:
+            out["vehicles"][ap.uav] = {
+                "sysid": ap.sysid,
+                "commands": Counter(command_name(r.command) for r in ap.log if r.executed),
+                "setpoints": ap.setpoints,
+                "modes": [t for _at, t in ap.events if t.startswith("mode")],
+                "failsafes": [t for _at, t in ap.events if "loss" in t or "breach" in t],
+            }
+        return out
+
 
 @contextlib.asynccontextmanager
 async def emulated_swarm(
@@ -46,18 +70,20 @@ async def emulated_swarm(
 ) -> AsyncIterator[LinkedSwarm]:
     uavs = task.uav_ids
     world = task.build_world(np.random.default_rng(cfg.seed + 0), cfg)
-    ports = await _free_udp_ports(len(uavs))
     opts = EmulatorOptions(
         uavs=len(uavs),
         personality=personality,
         local_base=0,
-        remote_ports=ports,
+        remote_ports=[9] * len(uavs),  # discard until the daemons' ports are chosen
         time_scale=TIME_SCALE,
         seed=cfg.seed,
     )
     host = EmulatorHost(opts, world=world, uav_ids=uavs)
     await host.start()
     try:
+        ports = await _free_udp_ports(len(uavs))
+        for i, port in enumerate(ports):
+            host.retarget(i, port)
         vehicles = {
             u: VehicleConfig(
                 backend="mavlink" if link == "mavlink" else "mavsdk",

@@ -87,7 +87,9 @@ class FlightLink:
     # -- lifecycle ------------------------------------------------------------------------
 
     async def open(self) -> None:
-        self._ep = await UdpEndpoint.open(self.url, self._on_datagram)
+        """Bind the socket (idempotent); ``local_port`` is known from here on."""
+        if self._ep is None:
+            self._ep = await UdpEndpoint.open(self.url, self._on_datagram)
 
     async def connect(self, timeout_s: float) -> Message:
         """Wait for the vehicle's heartbeat, then start our heartbeat and the watchdog."""

@@ -25,10 +25,11 @@ def config(port: int, **over: object) -> VehicleConfig:
 def test_the_watchdog_thread_holds_when_the_loop_stalls_despite_mavsdk_resending() -> None:
     """MAVSDK re-sends the last setpoint at 20 Hz from its own thread, so the autopilot's
     offboard-loss failsafe never sees a stalled daemon; our watchdog thread must hold."""
-    port = free_udp_ports(1)[0]
-    opts = EmulatorOptions(uavs=1, local_base=0, remote_ports=[port], time_scale=4.0,
+    opts = EmulatorOptions(uavs=1, local_base=0, remote_ports=[9], time_scale=4.0,
                            params={"COM_OF_LOSS_T": 0.5})  # fmt: skip
     with ThreadedEmulator(opts) as host:
+        port = free_udp_ports(1)[0]  # chosen after the emulator bound its own ports
+        host.retarget(0, port)
         ap = host.vehicles[0]
 
         async def scenario() -> None:

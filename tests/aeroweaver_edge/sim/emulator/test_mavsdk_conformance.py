@@ -25,10 +25,11 @@ from mavsdk.plugins.offboard import VelocityNedYaw  # noqa: E402
 
 @contextlib.asynccontextmanager
 async def mavsdk_client(personality: str) -> AsyncIterator[tuple[EmulatorHost, Any]]:
-    port = free_udp_ports(1)[0]
-    opts = EmulatorOptions(uavs=1, personality=personality, local_base=0, remote_ports=[port],
+    opts = EmulatorOptions(uavs=1, personality=personality, local_base=0, remote_ports=[9],
                            time_scale=4.0)  # fmt: skip
     async with EmulatorHost(opts) as host:
+        port = free_udp_ports(1)[0]  # chosen after the emulator bound its own ports
+        host.retarget(0, port)
         async with m.Mavsdk(m.Configuration.create_manual(1, 191, True)) as sdk:
             await sdk.add_any_connection(f"udpin://127.0.0.1:{port}")
             system = await sdk.first_autopilot(timeout_s=5.0)

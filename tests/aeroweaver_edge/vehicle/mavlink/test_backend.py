@@ -155,12 +155,12 @@ async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> No
 
 
 def test_an_event_loop_stall_stops_the_stream_and_the_autopilot_failsafe_fires() -> None:
-    port = free_udp_ports(1)[0]
     opts = EmulatorOptions(
-        uavs=1, local_base=0, remote_ports=[port], time_scale=4.0,
-        params={"COM_OF_LOSS_T": 0.5},
+        uavs=1, local_base=0, remote_ports=[9], time_scale=4.0, params={"COM_OF_LOSS_T": 0.5},
     )  # fmt: skip
     with ThreadedEmulator(opts) as host:
+        port = free_udp_ports(1)[0]  # chosen after the emulator bound its own ports
+        host.retarget(0, port)
         ap = host.vehicles[0]
 
         async def scenario() -> None:
@@ -188,11 +188,13 @@ def test_an_event_loop_stall_stops_the_stream_and_the_autopilot_failsafe_fires()
 
 async def test_own_body_scoping_only_the_configured_system_is_ever_addressed() -> None:
     # Two vehicles (sysid 1 and 2) both talk to one daemon port; the daemon flies sysid 2.
-    port = free_udp_ports(1)[0]
-    opts = EmulatorOptions(uavs=2, local_base=0, remote_ports=[port, port], time_scale=4.0)
+    opts = EmulatorOptions(uavs=2, local_base=0, remote_ports=[9, 9], time_scale=4.0)
     from aeroweaver_edge.sim.emulator.host import EmulatorHost
 
     async with EmulatorHost(opts) as host:
+        port = free_udp_ports(1)[0]
+        host.retarget(0, port)
+        host.retarget(1, port)
         v = MavlinkVehicle(vehicle_config(port, sysid=2), SafetyConfig(), "uav1")
         await v.start()
         try:

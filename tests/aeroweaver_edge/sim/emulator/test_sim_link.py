@@ -1,0 +1,52 @@
+"""``aeroweaver sim --link mavlink|mavsdk``: the same mission through real MAVLink bytes to
+emulated autopilots gives the returns of the in-process link (scripted selector)."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import pytest
+
+from aeroweaver_edge.sim.swarm import RunSummary, SwarmOptions, run_swarm
+
+SCRIPTED = {"selector": "scripted", "uavs": 3, "seed": 1, "max_rounds": 12}
+
+
+async def run(link: str, **over: object) -> RunSummary:
+    return await run_swarm(SwarmOptions(task="coverage", link=link, **{**SCRIPTED, **over}))  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def reference() -> dict[str, object]:
+    import asyncio
+
+    return asyncio.run(run("sim")).as_dict()
+
+
+def assert_same_returns(ref: dict[str, object], got: dict[str, object]) -> None:
+    assert got["rounds"] == ref["rounds"]
+    assert got["team_return"] == pytest.approx(ref["team_return"], rel=0.01)
+    for uav, r in ref["agent_returns"].items():  # type: ignore[attr-defined]
+        assert got["agent_returns"][uav] == pytest.approx(r, rel=0.01)  # type: ignore[index]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("personality", ["px4", "ardupilot"])
+async def test_mavlink_link_matches_the_sim_link(reference: dict[str, object], personality: str) -> None:
+    got = (await run("mavlink", personality=personality)).as_dict()
+    assert_same_returns(reference, got)
+    link = got["link"]
+    assert link["settle_mismatches"] == 0  # every declared setpoint arrived over MAVLink
+    for uav, v in link["vehicles"].items():
+        # each daemon went through the flight phases on its autopilot
+        assert v["commands"]["COMPONENT_ARM_DISARM"] == 1, uav
+        assert v["commands"]["NAV_TAKEOFF"] == 1, uav
+        assert v["setpoints"] > 0 and v["failsafes"] == []
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec("mavsdk") is None, reason="extra [mavsdk] absent")
+async def test_mavsdk_link_matches_the_sim_link(reference: dict[str, object]) -> None:
+    got = (await run("mavsdk")).as_dict()
+    assert_same_returns(reference, got)
+    assert got["link"]["settle_mismatches"] == 0
