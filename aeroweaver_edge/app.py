@@ -12,7 +12,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 
 from aeroweaver_edge.agent.scripted import NearestUncoveredScorer
-from aeroweaver_edge.config import ConfigError, UavConfig
+from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.daemon import DaemonPorts, DaemonStats, UavDaemon
 from aeroweaver_edge.decision_round import RoundOutcome
 from aeroweaver_edge.mesh import Mesh

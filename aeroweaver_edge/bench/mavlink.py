@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import itertools
 import json
 import statistics
 import sys
@@ -41,9 +42,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
     )  # fmt: skip
     v = MavlinkVehicle(cfg, SafetyConfig(), "bench")
     await v.link.open()  # bind first, then tell the emulator where we listen
-    opts = EmulatorOptions(
-        uavs=1, local_base=0, remote_ports=[v.link.local_port], time_scale=4.0
-    )
+    opts = EmulatorOptions(uavs=1, local_base=0, remote_ports=[v.link.local_port], time_scale=4.0)
     try:
         with ThreadedEmulator(opts) as host:
             ap = host.vehicles[0]
@@ -59,8 +58,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
             rtt = list(v.commands.stats.rtt_s)
             await v.arm()
             await v.takeoff(5.0)
-            while not (v.in_air and v.mode_role == "hold"):
-                await asyncio.sleep(0.01)
+            await v.wait_until(lambda: v.in_air and v.mode_role == "hold", 30.0, "take-off")
             await v.set_velocity(1.0, 0.0, 0.0)
             n0, t1 = ap.setpoints, time.monotonic()
             arrivals: list[float] = []
@@ -72,7 +70,7 @@ async def _bench(args: argparse.Namespace) -> dict[str, Any]:
                     last = ap.setpoints
             received = ap.setpoints - n0
             elapsed = time.monotonic() - t1
-            gaps = [b - a for a, b in zip(arrivals, arrivals[1:], strict=False)]
+            gaps = [b - a for a, b in itertools.pairwise(arrivals)]
             await v.land()
     finally:
         await v.aclose()

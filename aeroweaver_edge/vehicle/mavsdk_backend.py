@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import functools
 import logging
 import math
 import threading
@@ -46,7 +47,8 @@ def _import_mavsdk() -> Any:
         from mavsdk import asyncio as mavsdk_asyncio
     except ImportError:
         raise VehicleError(
-            "vehicle.backend 'mavsdk' needs the optional extra: pip install 'aeroweaver-edge[mavsdk]'"
+            "vehicle.backend 'mavsdk' needs the optional extra: "
+            "pip install 'aeroweaver-edge[mavsdk]'"
         ) from None
     if not str(getattr(mavsdk, "__version__", "0")).startswith("4."):
         raise VehicleError(f"mavsdk 4.x required, found {getattr(mavsdk, '__version__', '?')}")
@@ -151,7 +153,8 @@ class MavsdkVehicle:
         system = await self._mavsdk.first_autopilot(timeout_s=self.cfg.connect_timeout_s)
         if system is None:
             raise VehicleError(
-                f"{self.name}: no autopilot on {self.cfg.url} within {self.cfg.connect_timeout_s:g} s"
+                f"{self.name}: no autopilot on {self.cfg.url} "
+                f"within {self.cfg.connect_timeout_s:g} s"
             )
         self._system = system
         raw = system._system
@@ -191,7 +194,7 @@ class MavsdkVehicle:
                 await self._refresher
         if self._watchdog is not None:
             await asyncio.to_thread(self._watchdog.join, 2.0)
-        for plugin, handle in self._subs:
+        for plugin, _handle in self._subs:
             with contextlib.suppress(Exception):
                 name = {
                     id(plugin): plugin,
@@ -230,9 +233,13 @@ class MavsdkVehicle:
     # -- preflight ----------------------------------------------------------------------------
 
     async def _read_param(self, name: str) -> float | None:
-        for getter in (self._param.get_param_int, self._param.get_param_float):
+        getters: list[Callable[[str], Any]] = [
+            self._param.get_param_int,
+            self._param.get_param_float,
+        ]
+        for getter in getters:
             with contextlib.suppress(VehicleError):
-                return float(await self._call(lambda g=getter: g(name)))
+                return float(await self._call(functools.partial(getter, name)))
         return None
 
     async def _preflight(self) -> None:

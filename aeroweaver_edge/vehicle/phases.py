@@ -112,7 +112,7 @@ class FlightPhases:
         """Bring the vehicle into the MISSION phase once; True when it is there."""
         async with self._lock:
             if self.phase != Phase.GROUND:
-                return self.phase == Phase.MISSION
+                return self._in_mission()
             try:
                 await self._launch()
             except Exception as exc:  # never let a launch problem end the daemon
@@ -120,7 +120,10 @@ class FlightPhases:
                 log.error("%s: launch failed: %s", self.uav, exc)
                 self._to(Phase.REFUSED, str(exc))
                 await self._safe_hold()
-            return self.phase == Phase.MISSION
+            return self._in_mission()
+
+    def _in_mission(self) -> bool:
+        return self.phase == Phase.MISSION
 
     async def _launch(self) -> None:
         st = await self.inner.state()

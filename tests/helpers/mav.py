@@ -16,7 +16,6 @@ from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
 from aeroweaver_edge.sim.emulator.thread import ThreadedEmulator
 from aeroweaver_edge.vehicle.mavlink.backend import MavlinkVehicle
 
-
 __all__ = ["FAST", "ThreadedEmulator", "emulated", "free_udp_ports", "until", "vehicle_config"]
 
 

@@ -655,7 +655,8 @@ def test_vehicle_action_skills_hold_and_are_offered_in_the_right_state(
     assert skill.options(refused, ctx("any")) == []
     intent = skill.execute(option, offered, ctx("any"))
     # The motion is a hold; the vehicle action goes to the daemon's flight phases.
-    assert intent.motion == HOLD.motion and intent.messages == ()
+    assert intent.motion == HOLD.motion
+    assert intent.messages == ()
     assert intent.action == VehicleAction(KIND[name])
     assert any("vehicle port" in c for c in skill.doc.conditions)
 

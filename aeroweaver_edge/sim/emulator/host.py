@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import time
 from collections.abc import Sequence
@@ -100,7 +101,7 @@ class EmulatorHost:
                     uav=u,
                     personality=pers,
                     world=lambda: self.world,
-                    transmit=lambda data, i=i: self._transmit(i, data),  # type: ignore[misc]
+                    transmit=functools.partial(self._transmit, i),
                     origin=opts.origin,
                     time_scale=opts.time_scale,
                     params=opts.params,
@@ -122,9 +123,7 @@ class EmulatorHost:
         for i in range(self.opts.uavs):
             port = 0 if local_base == 0 else local_base + i
             url = UdpUrl("udpin", self.opts.host, port)
-            self._eps[i] = await UdpEndpoint.open(
-                url, lambda data, addr, i=i: self._on_datagram(i, data, addr)
-            )
+            self._eps[i] = await UdpEndpoint.open(url, functools.partial(self._on_datagram, i))
         for v in self.vehicles:
             v.send_heartbeat()
         self._tasks = [asyncio.create_task(self._run(), name="emulator-tick")]

@@ -89,7 +89,7 @@ async def emulated_swarm(
                 backend="mavlink" if link == "mavlink" else "mavsdk",
                 url=f"udpin://127.0.0.1:{port}",
                 sysid=i + 1,
-                personality=personality if link == "mavlink" else "auto",  # type: ignore[arg-type]
+                personality=personality if link == "mavlink" else "auto",
                 altitude_m=cfg.altitude_m,
                 sim_world=True,
             )

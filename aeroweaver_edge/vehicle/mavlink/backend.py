@@ -15,6 +15,7 @@ import contextlib
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -310,10 +311,10 @@ class MavlinkVehicle:
         await self.commands.send(
             mavlink.MAV_CMD_DO_SET_MODE, p1, p2, p3, done=lambda: self.mode_name == mode
         )
-        await self._until(lambda: self.mode_name == mode, MODE_CONFIRM_S, f"mode {mode}")
+        await self.wait_until(lambda: self.mode_name == mode, MODE_CONFIRM_S, f"mode {mode}")
 
-    async def _until(self, cond: object, timeout_s: float, what: str) -> None:
-        assert callable(cond)
+    async def wait_until(self, cond: Callable[[], bool], timeout_s: float, what: str) -> None:
+        """Poll telemetry state until ``cond()``; VehicleError after ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
         while not cond():
             if time.monotonic() > deadline:
@@ -334,7 +335,7 @@ class MavlinkVehicle:
             await self.commands.send(
                 mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, done=lambda: self.armed
             )
-            await self._until(lambda: self.armed, MODE_CONFIRM_S, "arming")
+            await self.wait_until(lambda: self.armed, MODE_CONFIRM_S, "arming")
 
     async def takeoff(self, altitude_m: float) -> None:
         self._require_link()

@@ -24,8 +24,8 @@ from aeroweaver_edge.vehicle.mavlink.link import FlightLink, LinkError
 
 log = logging.getLogger(__name__)
 
-ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
-IN_PROGRESS = mavlink.MAV_RESULT_IN_PROGRESS
+ACCEPTED: int = mavlink.MAV_RESULT_ACCEPTED
+IN_PROGRESS: int = mavlink.MAV_RESULT_IN_PROGRESS
 RESULT_NAMES = {
     v: k.removeprefix("MAV_RESULT_")
     for k, v in vars(mavlink).items()

@@ -13,8 +13,9 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
+from typing import Any
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +49,7 @@ class SetpointStream:
         *,
         rate_hz: float,
         lease_s: float,
-        on_expired: Callable[[], Awaitable[None]],
+        on_expired: Callable[[], Coroutine[Any, Any, None]],
     ) -> None:
         if rate_hz < 2.0:
             raise ValueError(f"setpoint rate must be >= 2 Hz for offboard control, got {rate_hz}")

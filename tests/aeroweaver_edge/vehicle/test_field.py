@@ -24,7 +24,9 @@ async def test_wall_clock_ticks_and_skips_overrun_rounds() -> None:
     assert (await clock.next_round()) == RoundTick(0, 1, 1.0)
     await asyncio.sleep(0.2)  # a slow decision overran about ten rounds
     late = await clock.next_round()
-    assert late is not None and late.round >= 8 and clock.skipped == late.round - 2
+    assert late is not None
+    assert late.round >= 8
+    assert clock.skipped == late.round - 2
     while (tick := await clock.next_round()) is not None:
         assert tick.round < 40
     with pytest.raises(ValueError, match="must be > 0"):
@@ -44,11 +46,13 @@ async def test_field_perception_from_telemetry_beacons_and_points() -> None:
         per.attach(lambda: beacons)
         own, seen = await per.sense(RoundTick(0, 0, 1.0))
         assert own.pos[:2] == pytest.approx((0.0, 0.0), abs=1e-3)  # from LOCAL_POSITION_NED
-        assert not own.in_air and not own.armed
+        assert not own.in_air
+        assert not own.armed
         assert [e.id for e in seen] == ["W0", "uav1"]  # uav2 is out of range
         now[0] += 5.0  # no new beacon from uav1 for 5 s (local receipt time): stale
         _own, seen = await per.sense(RoundTick(0, 1, 1.0))
         assert [e.id for e in seen] == ["W0"]
         beacons["uav1"] = beacon("uav1", 2, 21.0, 0.0)  # a fresh one
         _own, seen = await per.sense(RoundTick(0, 2, 1.0))
-        assert [e.id for e in seen] == ["W0", "uav1"] and seen[1].pos[0] == 21.0
+        assert [e.id for e in seen] == ["W0", "uav1"]
+        assert seen[1].pos[0] == 21.0

@@ -13,12 +13,16 @@ from aeroweaver_edge.vehicle.errors import VehicleError
 from tests.helpers.mav import FAST, ThreadedEmulator, free_udp_ports, until
 
 pytest.importorskip("mavsdk.asyncio", reason="optional extra [mavsdk] not installed")
-from aeroweaver_edge.vehicle.mavsdk_backend import MavsdkVehicle  # noqa: E402
+from aeroweaver_edge.vehicle.mavsdk_backend import MavsdkVehicle
 
 
 def config(port: int, **over: object) -> VehicleConfig:
     return VehicleConfig(
-        backend="mavsdk", url=f"udpin://127.0.0.1:{port}", sysid=1, **FAST, **over  # type: ignore[arg-type]
+        backend="mavsdk",
+        url=f"udpin://127.0.0.1:{port}",
+        sysid=1,
+        **FAST,
+        **over,  # type: ignore[arg-type]
     )
 
 

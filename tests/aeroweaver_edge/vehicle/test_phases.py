@@ -24,13 +24,15 @@ async def test_launch_goes_preflight_arm_takeoff_offboard_mission() -> None:
         assert await p.launch()
         assert phases_of(p) == ["preflight", "arming", "taking_off", "offboard", "mission"]
         ap = host.vehicles[0]
-        assert ap.mode == "OFFBOARD" and ap.alt == pytest.approx(6.0)
+        assert ap.mode == "OFFBOARD"
+        assert ap.alt == pytest.approx(6.0)
         assert await p.launch()  # idempotent: nothing is sent twice
         assert sum(r.command == ARM for r in ap.log) == 1
         await p.set_velocity(1.0, 0.0, 0.0)
         await until(lambda: ap.world.body("uav0").sp_n == 1.0, 2, "velocity")
         await p.finish("mission end")
-        assert p.phase == Phase.LANDING and ap.mode == "AUTO.LAND"
+        assert p.phase == Phase.LANDING
+        assert ap.mode == "AUTO.LAND"
 
 
 async def test_a_restarted_daemon_in_the_air_never_arms_or_takes_off() -> None:
@@ -67,7 +69,8 @@ async def test_link_loss_degrades_and_the_first_command_after_it_is_a_hold() -> 
         await until(lambda: not v.link.lost and v._fresh(), 3, "link back")
         n = ap.setpoints
         await p.set_velocity(2.0, 0.0, 0.0)  # the round that notices recovery only holds
-        assert p.phase == Phase.MISSION and ap.setpoints == n
+        assert p.phase == Phase.MISSION
+        assert ap.setpoints == n
         assert p.stats.refused_motion["recovery"] == 1
         await p.set_velocity(2.0, 0.0, 0.0)  # the next, fresh decision flies
         await until(lambda: ap.world.body("uav0").sp_n == 2.0, 3, "fresh motion")
@@ -95,10 +98,12 @@ async def test_vehicle_actions_pass_the_approval_predicate() -> None:
         assert ap.log == [] or all(r.command != ARM for r in ap.log)
         approved = FlightPhases(v, uav="uav0", altitude_m=5.0, approve=lambda _u, _a: True)
         assert await approved.act(VehicleAction("takeoff", 7.0)) is None
-        assert ap.alt == pytest.approx(7.0) and approved.phase == Phase.MISSION
+        assert ap.alt == pytest.approx(7.0)
+        assert approved.phase == Phase.MISSION
         assert await approved.act(VehicleAction("takeoff")) == "take-off refused in phase mission"
         assert await approved.act(VehicleAction("return_home")) is None
-        assert approved.phase == Phase.RETURNING and ap.mode == "AUTO.RTL"
+        assert approved.phase == Phase.RETURNING
+        assert ap.mode == "AUTO.RTL"
 
 
 async def test_finish_returns_home_when_configured() -> None:
@@ -106,4 +111,5 @@ async def test_finish_returns_home_when_configured() -> None:
         p = FlightPhases(v, uav="uav0", altitude_m=5.0, end_action="return")
         await p.launch()
         await p.finish("operator stop")
-        assert p.phase == Phase.RETURNING and host.vehicles[0].mode == "AUTO.RTL"
+        assert p.phase == Phase.RETURNING
+        assert host.vehicles[0].mode == "AUTO.RTL"

@@ -23,6 +23,11 @@ from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 from mavsdk.plugins.offboard import VelocityNedYaw  # noqa: E402
 
 
+async def has_position(tel: Any) -> bool:
+    lat = (await tel.position()).latitude_deg
+    return bool(lat == lat)  # NaN until the first GLOBAL_POSITION_INT
+
+
 @contextlib.asynccontextmanager
 async def mavsdk_client(personality: str) -> AsyncIterator[tuple[EmulatorHost, Any]]:
     opts = EmulatorOptions(uavs=1, personality=personality, local_base=0, remote_ports=[9],
@@ -38,10 +43,10 @@ async def mavsdk_client(personality: str) -> AsyncIterator[tuple[EmulatorHost, A
 
 
 async def eventually(get: Callable[[], Awaitable[Any]], want: Any, timeout_s: float = 5.0) -> None:
-    async with asyncio.timeout(timeout_s):
-        while (got := await get()) != want:
-            await asyncio.sleep(0.05)
-    assert got == want
+    deadline = asyncio.get_running_loop().time() + timeout_s
+    while (got := await get()) != want:
+        assert asyncio.get_running_loop().time() < deadline, f"still {got!r}, want {want!r}"
+        await asyncio.sleep(0.05)
 
 
 async def test_mavsdk_flies_an_emulated_px4() -> None:
@@ -53,9 +58,8 @@ async def test_mavsdk_flies_an_emulated_px4() -> None:
         assert version.flight_sw_major == 1
         assert await param.get_param_float("COM_OF_LOSS_T") == pytest.approx(1.0)
         assert await param.get_param_int("COM_OBL_RC_ACT") == 5  # PX4's bytewise int encoding
-        async with asyncio.timeout(5):
-            while (pos := await tel.position()).latitude_deg != pos.latitude_deg:  # NaN: none yet
-                await asyncio.sleep(0.05)
+        await eventually(lambda: has_position(tel), True)
+        pos = await tel.position()
         assert pos.latitude_deg == pytest.approx(ap.origin.lat_deg, abs=1e-6)
         await action.arm()
         await eventually(tel.armed, True)

@@ -32,7 +32,9 @@ def assert_same_returns(ref: dict[str, object], got: dict[str, object]) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("personality", ["px4", "ardupilot"])
-async def test_mavlink_link_matches_the_sim_link(reference: dict[str, object], personality: str) -> None:
+async def test_mavlink_link_matches_the_sim_link(
+    reference: dict[str, object], personality: str
+) -> None:
     got = (await run("mavlink", personality=personality)).as_dict()
     assert_same_returns(reference, got)
     link = got["link"]
@@ -41,7 +43,8 @@ async def test_mavlink_link_matches_the_sim_link(reference: dict[str, object], p
         # each daemon went through the flight phases on its autopilot
         assert v["commands"]["COMPONENT_ARM_DISARM"] == 1, uav
         assert v["commands"]["NAV_TAKEOFF"] == 1, uav
-        assert v["setpoints"] > 0 and v["failsafes"] == []
+        assert v["setpoints"] > 0
+        assert v["failsafes"] == []
 
 
 @pytest.mark.slow

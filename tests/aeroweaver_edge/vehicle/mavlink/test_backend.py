@@ -31,7 +31,9 @@ async def fly(v: MavlinkVehicle, alt: float = 5.0) -> None:
 
 
 def modes(ap: EmulatedAutopilot) -> list[str]:
-    return [text.split(" -> ")[1].split(" ")[0] for _t, text in ap.events if text.startswith("mode")]
+    return [
+        text.split(" -> ")[1].split(" ")[0] for _t, text in ap.events if text.startswith("mode")
+    ]
 
 
 def executed(ap: EmulatedAutopilot, command: int) -> int:
@@ -52,7 +54,8 @@ async def test_mode_mapping_for_takeoff_offboard_hold_land_and_rtl(
         ap = host.vehicles[0]
         assert v.personality.name == personality  # picked from the heartbeat
         await v.arm()
-        assert ap.armed and v.armed
+        assert ap.armed
+        assert v.armed
         await v.takeoff(4.0)
         await until(lambda: ap.alt >= 4.0 - 1e-6 and v.in_air, 10, "climb")
         assert takeoff in modes(ap)
@@ -93,13 +96,17 @@ async def test_in_progress_waits_for_the_final_ack_without_resending() -> None:
 async def test_no_acks_fail_after_bounded_retries_with_a_clear_error() -> None:
     async with emulated(1, vehicle={"command_retries": 2}) as (host, [v]):
         host.vehicles[0].faults.no_acks = True
-        with pytest.raises(CommandError, match=r"DO_ORBIT: no COMMAND_ACK from system 1 after 3 tries"):
+        with pytest.raises(
+            CommandError, match=r"DO_ORBIT: no COMMAND_ACK from system 1 after 3 tries"
+        ):
             await v.commands.send(mavlink.MAV_CMD_DO_ORBIT, 10.0)
         recs = [r for r in host.vehicles[0].log if r.command == mavlink.MAV_CMD_DO_ORBIT]
         assert [r.confirmation for r in recs] == [0, 1, 2]  # confirmation counts the retries
 
 
-async def test_ten_percent_loss_both_ways_acked_commands_succeed_without_duplicated_actions() -> None:
+async def test_ten_percent_loss_both_ways_acked_commands_succeed_without_duplicated_actions() -> (
+    None
+):
     faults = [Faults(drop_rx=0.1, drop_tx=0.1)]
     async with emulated(1, faults=faults, vehicle={"command_retries": 8}) as (host, [v]):
         ap = host.vehicles[0]
@@ -202,8 +209,11 @@ async def test_own_body_scoping_only_the_configured_system_is_ever_addressed() -
             await v.set_velocity(1.0, 0.0, 0.0)
             await v.land()
             other, mine = host.vehicles
-            assert other.log == [] and other.setpoints == 0 and other.rx["PARAM_REQUEST_READ"] == 0
-            assert mine.log and all(r.target[0] == 2 for r in mine.log)
+            assert other.log == []
+            assert other.setpoints == 0
+            assert other.rx["PARAM_REQUEST_READ"] == 0
+            assert mine.log
+            assert all(r.target[0] == 2 for r in mine.log)
             assert set(v.link.stats.sent_to) == {2}
             assert v.link.stats.foreign[1] > 0  # the other vehicle's traffic was dropped
             stray = v.link.mav.command_long_encode(1, 1, ARM, 0, 1, 0, 0, 0, 0, 0, 0)
@@ -215,7 +225,8 @@ async def test_own_body_scoping_only_the_configured_system_is_ever_addressed() -
 
 async def test_failsafe_check_refuses_to_arm_an_unsafe_profile_and_names_the_parameter() -> None:
     async with emulated(1, params={"COM_OBL_RC_ACT": 0}) as (host, [v]):
-        assert v.refused is not None and "COM_OBL_RC_ACT=0" in v.refused
+        assert v.refused is not None
+        assert "COM_OBL_RC_ACT=0" in v.refused
         assert not (await v.health()).ok
         with pytest.raises(VehicleError, match="refusing to arm: COM_OBL_RC_ACT=0"):
             await v.arm()
@@ -238,18 +249,21 @@ async def test_ardupilot_failsafe_parameters_are_read_with_their_encoding() -> N
     async with emulated(1, personality="ardupilot", params={"FENCE_ACTION": 0}) as (_h, [v]):
         assert v.preflight.params["GUID_TIMEOUT"] == 3.0
         assert v.preflight.params["FENCE_ENABLE"] == 1.0
-        assert v.refused is not None and "FENCE_ACTION=0" in v.refused
+        assert v.refused is not None
+        assert "FENCE_ACTION=0" in v.refused
 
 
 async def test_the_safety_geofence_is_uploaded_and_the_autopilot_enforces_it() -> None:
     safety = SafetyConfig(geofence_north_m=(-10.0, 10.0), geofence_east_m=(-10.0, 10.0))
     async with emulated(1, safety=safety) as (host, [v]):
         ap = host.vehicles[0]
-        assert v.preflight.fence_uploaded and len(ap.fence) == 4
+        assert v.preflight.fence_uploaded
+        assert len(ap.fence) == 4
         corners = [ap.origin.to_local(it.x / 1e7, it.y / 1e7, 0.0)[:2] for it in ap.fence]
         expected = [(-10, -10), (10, -10), (10, 10), (-10, 10)]
         for (n, e), (en, ee) in zip(corners, expected, strict=True):
-            assert n == pytest.approx(en, abs=0.05) and e == pytest.approx(ee, abs=0.05)
+            assert n == pytest.approx(en, abs=0.05)
+            assert e == pytest.approx(ee, abs=0.05)
         await fly(v)
         await v.set_velocity(8.0, 0.0, 0.0)  # straight through the northern edge
         await until(lambda: any("geofence breach" in e for _t, e in ap.events), 5, "breach")
@@ -260,7 +274,10 @@ async def test_the_safety_geofence_is_uploaded_and_the_autopilot_enforces_it() -
 async def test_no_heartbeat_means_a_clear_connect_error_and_nothing_left_open() -> None:
     port = free_udp_ports(1)[0]
     v = MavlinkVehicle(vehicle_config(port, connect_timeout_s=0.3), SafetyConfig(), "uav0")
-    with pytest.raises(VehicleError, match=r"uav0: no heartbeat from an autopilot on udpin://127.0.0.1:\d+ within 0.3 s"):
+    with pytest.raises(
+        VehicleError,
+        match=r"uav0: no heartbeat from an autopilot on udpin://127.0.0.1:\d+ within 0.3 s",
+    ):
         await v.start()
     assert v.link._ep is None
 

@@ -94,11 +94,14 @@ async def test_a_signed_link_flies_and_persists_its_timestamp(tmp_path: Path) ->
 async def test_an_unsigned_daemon_gets_nothing_done_on_a_signing_vehicle() -> None:
     async with emulated(1, signing_keys=[KEY], vehicle={"command_retries": 1}) as (host, [v]):
         ap = host.vehicles[0]
-        assert v.refused is not None and "could not be read" in v.refused
+        assert v.refused is not None
+        assert "could not be read" in v.refused
         with pytest.raises(VehicleError, match="refusing to arm"):
             await v.arm()
         assert ap.codec.stats.bad["signature"] > 0
-        assert ap.log == [] and ap.rx["PARAM_REQUEST_READ"] == 0 and not ap.armed
+        assert ap.log == []
+        assert ap.rx["PARAM_REQUEST_READ"] == 0
+        assert not ap.armed
 
 
 async def test_a_wrong_key_is_named_in_the_connect_error(tmp_path: Path) -> None:
@@ -135,5 +138,6 @@ async def test_a_replayed_signed_command_is_refused_by_the_vehicle() -> None:
 
 def test_write_key_generates_random_keys(tmp_path: Path) -> None:
     a, b = write_key(tmp_path / "a.key"), write_key(tmp_path / "b.key")
-    assert a != b and len(a) == 32
+    assert a != b
+    assert len(a) == 32
     assert os.stat(tmp_path / "a.key").st_mode & 0o077 == 0
