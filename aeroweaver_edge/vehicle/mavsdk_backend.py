@@ -89,6 +89,7 @@ class MavsdkVehicle:
         self.flight_mode = "UNKNOWN"
         self.connected = False
         self.home: Any = None
+        self.glob: tuple[float, float, float] | None = None
         self.refused: str | None = None
         self.problems: list[str] = []
         # offboard under a lease; the watchdog thread reads these two floats
@@ -171,6 +172,7 @@ class MavsdkVehicle:
             (t, t.subscribe_in_air(self._threadsafe(self._on_in_air))),
             (t, t.subscribe_flight_mode(self._threadsafe(self._on_mode))),
             (t, t.subscribe_home(self._threadsafe(self._on_home))),
+            (t, t.subscribe_position(self._threadsafe(self._on_position))),
         ]
         self.connected = True
         deadline = time.monotonic() + self.cfg.connect_timeout_s
@@ -194,12 +196,7 @@ class MavsdkVehicle:
                 await self._refresher
         if self._watchdog is not None:
             await asyncio.to_thread(self._watchdog.join, 2.0)
-        for plugin, _handle in self._subs:
-            with contextlib.suppress(Exception):
-                name = {
-                    id(plugin): plugin,
-                }
-                del name
+        self._subs.clear()  # destroying a plugin ends its subscriptions
         for plugin in (self._offboard, self._action, self._param, self._geofence, self._telemetry):
             if plugin is not None:
                 with contextlib.suppress(Exception):
@@ -230,6 +227,10 @@ class MavsdkVehicle:
     def _on_home(self, home: Any) -> None:
         self.home = home
 
+    def _on_position(self, p: Any) -> None:
+        if math.isfinite(p.latitude_deg) and math.isfinite(p.longitude_deg):
+            self.glob = (p.latitude_deg, p.longitude_deg, p.absolute_altitude_m)
+
     # -- preflight ----------------------------------------------------------------------------
 
     async def _read_param(self, name: str) -> float | None:
@@ -251,9 +252,8 @@ class MavsdkVehicle:
             problem = rule.check(await self._read_param(rule.name))
             if problem:
                 self.problems.append(problem)
-        if self.cfg.upload_fence and self.pos is not None and self.home is not None:
-            # the local origin from home: home's local position is the origin offset
-            origin = GeoOrigin(self.home.latitude_deg, self.home.longitude_deg)
+        origin = await self._origin()
+        if self.cfg.upload_fence and origin is not None:
             s = self.safety
             corners = [
                 (s.geofence_north_m[0], s.geofence_east_m[0]),
@@ -261,24 +261,29 @@ class MavsdkVehicle:
                 (s.geofence_north_m[1], s.geofence_east_m[1]),
                 (s.geofence_north_m[0], s.geofence_east_m[1]),
             ]
-            hn, he = self._home_local()
-            points = [Point(*origin.to_global(n - hn, e - he)[:2]) for n, e in corners]
+            points = [Point(*origin.to_global(n, e)[:2]) for n, e in corners]
             data = GeofenceData(polygons=[Polygon(points, FenceType.INCLUSION)], circles=[])
             try:
                 await self._call(lambda: self._geofence.upload_geofence(data))
             except VehicleError as exc:
                 self.problems.append(f"geofence not uploaded: {exc}")
         elif self.cfg.upload_fence:
-            self.problems.append("geofence not uploaded: no home position")
+            self.problems.append("geofence not uploaded: no global position to anchor it")
         for p in self.problems:
             log.warning("%s: preflight: %s", self.name, p)
         if self.problems and self.cfg.failsafe_policy == "refuse":
             self.refused = "; ".join(self.problems)
 
-    def _home_local(self) -> tuple[float, float]:
-        """Home's local NED position: the emulator and PX4 put the EKF origin at home, except
-        when they do not; MAVSDK gives no local home, so assume the origin is home."""
-        return 0.0, 0.0
+    async def _origin(self) -> GeoOrigin | None:
+        """The local frame's geodetic origin from one global + local position pair (the
+        fence is given in the local frame; home need not be its origin)."""
+        for _ in range(40):
+            if self.glob is not None and self.pos is not None:
+                lat, lon, alt = self.glob
+                n, e, d = self.pos
+                return GeoOrigin(*GeoOrigin(lat, lon, alt).to_global(-n, -e, -d))
+            await asyncio.sleep(0.05)
+        return None
 
     # -- lease refresher and watchdog -----------------------------------------------------------
 
@@ -295,7 +300,8 @@ class MavsdkVehicle:
 
     def _watch(self) -> None:
         """Runs in its own thread: holds the vehicle if the loop or the agent went silent."""
-        grace = max(3.0 / self.cfg.setpoint_hz, 0.25)
+        # Like PX4's COM_OF_LOSS_T: half the lease (1 s by default), at least 3 periods.
+        grace = max(3.0 / self.cfg.setpoint_hz, 0.5 * self.cfg.lease_s)
         while not self._stop.wait(WATCHDOG_PERIOD_S):
             if not self._offboard_on:
                 continue
@@ -372,13 +378,18 @@ class MavsdkVehicle:
         self._lease_until = now + self.cfg.lease_s
         self._last_refresh = now
         async with self._lock:
-            if not self._offboard_on or self.flight_mode != "OFFBOARD":
-                await self._offboard_velocity(0.0, 0.0, 0.0)  # zero setpoint first
-                await asyncio.sleep(0.5)
-                await self._call(self._offboard.start)
-                self._last_refresh = time.monotonic()
-                self._offboard_on = True
-            await send()
+            for _ in range(2):  # the watchdog thread may stop offboard while we send
+                if not self._offboard_on or self.flight_mode != "OFFBOARD":
+                    await self._offboard_velocity(0.0, 0.0, 0.0)  # zero setpoint first
+                    await asyncio.sleep(0.5)
+                    self._last_refresh = time.monotonic()
+                    await self._call(self._offboard.start)
+                    self._last_refresh = time.monotonic()
+                    self._offboard_on = True
+                await send()
+                if self._offboard_on:
+                    return
+            raise VehicleError(f"{self.name}: offboard stopped by the watchdog twice")
 
     async def set_velocity(self, north: float, east: float, down: float) -> None:
         if not all(math.isfinite(v) for v in (north, east, down)):
