@@ -53,3 +53,5 @@ async def test_mavsdk_link_matches_the_sim_link(reference: dict[str, object]) ->
     got = (await run("mavsdk")).as_dict()
     assert_same_returns(reference, got)
     assert got["link"]["settle_mismatches"] == 0
+    # MAVSDK uploaded the fence around the local origin: nobody breached it
+    assert all(v["failsafes"] == [] for v in got["link"]["vehicles"].values())
