@@ -53,6 +53,7 @@ async def test_mode_mapping_for_takeoff_offboard_hold_land_and_rtl(
     async with emulated(1, personality=personality) as (host, [v]):
         ap = host.vehicles[0]
         assert v.personality.name == personality  # picked from the heartbeat
+        assert v.link.sysid == 1 and v.link.codec.src_system == 1  # system id from it too
         await v.arm()
         assert ap.armed
         assert v.armed
@@ -289,3 +290,17 @@ async def test_no_takeoff_while_airborne_and_no_motion_on_the_ground() -> None:
         await fly(v)
         with pytest.raises(VehicleError, match="already in the air"):
             await v.takeoff(5.0)
+
+
+async def test_stale_position_telemetry_degrades_even_with_heartbeats() -> None:
+    async with emulated(1, vehicle={"link_timeout_s": 0.5}) as (host, [v]):
+        ap = host.vehicles[0]
+        await fly(v)
+        ap.intervals.pop(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)  # position stream stops
+        await until(lambda: v.link.age("LOCAL_POSITION_NED") > 0.5, 3, "position stale")
+        health = await v.health()
+        assert not health.ok
+        assert health.detail == "position telemetry stale"
+        assert v.link.alive  # heartbeats still flow
+        with pytest.raises(VehicleError, match="telemetry stale; no new motion"):
+            await v.set_velocity(1.0, 0.0, 0.0)
