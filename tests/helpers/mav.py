@@ -33,7 +33,6 @@ def free_udp_ports(n: int) -> list[int]:
 
 
 FAST = {
-    "link_timeout_s": 1.0,
     "command_timeout_s": 0.2,
     "connect_timeout_s": 5.0,
 }

@@ -62,7 +62,7 @@ async def test_link_loss_degrades_and_the_first_command_after_it_is_a_hold() -> 
         p = FlightPhases(v, uav="uav0", altitude_m=5.0)
         await p.launch()
         ap.faults.mute = True
-        await until(lambda: v.link.lost, 3, "loss")
+        await until(lambda: v.link.lost, 5, "loss")
         await p.set_velocity(2.0, 0.0, 0.0)
         assert p.phase == Phase.DEGRADED
         ap.faults.mute = False

@@ -53,7 +53,8 @@ async def test_mode_mapping_for_takeoff_offboard_hold_land_and_rtl(
     async with emulated(1, personality=personality) as (host, [v]):
         ap = host.vehicles[0]
         assert v.personality.name == personality  # picked from the heartbeat
-        assert v.link.sysid == 1 and v.link.codec.src_system == 1  # system id from it too
+        assert v.link.sysid == 1
+        assert v.link.codec.src_system == 1
         await v.arm()
         assert ap.armed
         assert v.armed
@@ -138,7 +139,7 @@ async def test_lease_expiry_hands_the_vehicle_to_the_autopilot_hold() -> None:
 
 
 async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> None:
-    async with emulated(1, vehicle={"link_timeout_s": 1.0}) as (host, [v]):
+    async with emulated(1, vehicle={"link_timeout_s": 1.5}) as (host, [v]):
         ap = host.vehicles[0]
         await fly(v)
         await v.set_velocity(2.0, 1.0, 0.0)
@@ -293,11 +294,11 @@ async def test_no_takeoff_while_airborne_and_no_motion_on_the_ground() -> None:
 
 
 async def test_stale_position_telemetry_degrades_even_with_heartbeats() -> None:
-    async with emulated(1, vehicle={"link_timeout_s": 0.5}) as (host, [v]):
+    async with emulated(1) as (host, [v]):
         ap = host.vehicles[0]
         await fly(v)
         ap.intervals.pop(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)  # position stream stops
-        await until(lambda: v.link.age("LOCAL_POSITION_NED") > 0.5, 3, "position stale")
+        await until(lambda: v.link.age("LOCAL_POSITION_NED") > 2.5, 5, "position stale")
         health = await v.health()
         assert not health.ok
         assert health.detail == "position telemetry stale"
