@@ -111,6 +111,8 @@ class FlightPhases:
     async def launch(self) -> bool:
         """Bring the vehicle into the MISSION phase once; True when it is there."""
         async with self._lock:
+            if self.phase in (Phase.LANDING, Phase.RETURNING) and not await self._airborne():
+                self._to(Phase.GROUND, "landed; ready for the next mission")
             if self.phase != Phase.GROUND:
                 return self._in_mission()
             try:
@@ -124,6 +126,12 @@ class FlightPhases:
 
     def _in_mission(self) -> bool:
         return self.phase == Phase.MISSION
+
+    async def _airborne(self) -> bool:
+        try:
+            return (await self.inner.state()).in_air
+        except Exception:
+            return True  # unknown: assume the worst, do not relaunch
 
     async def _launch(self) -> None:
         st = await self.inner.state()
