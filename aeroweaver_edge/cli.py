@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib.util
 import logging
 import os
 import signal
@@ -53,6 +54,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from aeroweaver_edge.sim.view import LiveView, print_summary
 
     task, uavs = args.task, args.uavs or 3
+    if args.link == "mavsdk" and importlib.util.find_spec("mavsdk") is None:
+        print("aeroweaver: --link mavsdk needs the optional extra: "
+              "pip install 'aeroweaver-edge[mavsdk]'", file=sys.stderr)  # fmt: skip
+        return 2
     if args.mission:
         task, uavs = _sim_shape(args.mission, args.uavs)
     opts = SwarmOptions(

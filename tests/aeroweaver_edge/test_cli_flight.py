@@ -78,3 +78,16 @@ def test_bench_mavlink_prints_the_link_figures(capsys: pytest.CaptureFixture[str
     out = capsys.readouterr().out
     assert "command round trip (COMMAND_LONG -> COMMAND_ACK, n=200): p50" in out
     assert "Hz received by the autopilot (configured 20 Hz)" in out
+
+
+def test_sim_link_mavsdk_without_the_extra_is_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "mavsdk" else real(name, *a)
+    )
+    assert main(["sim", "coverage", "--selector", "scripted", "--link", "mavsdk"]) == 2
+    assert "pip install 'aeroweaver-edge[mavsdk]'" in capsys.readouterr().err
