@@ -484,6 +484,8 @@ class MavlinkVehicle:
             return
         try:
             async with self._action:
+                if self.stream.active:
+                    return  # a fresh command renewed the lease meanwhile: it stands
                 await self._set_mode("hold")
         except (VehicleError, LinkError) as exc:
             log.warning("%s: hold after lease expiry failed: %s", self.name, exc)

@@ -138,6 +138,15 @@ async def test_lease_expiry_hands_the_vehicle_to_the_autopilot_hold() -> None:
         assert ap.world.body("uav0").sp_n == 0.0  # hold zeroes the setpoint
 
 
+async def test_a_command_racing_the_lease_expiry_is_not_overridden_by_the_hold() -> None:
+    async with emulated(1) as (host, [v]):
+        await fly(v)
+        await v.set_velocity(2.0, 0.0, 0.0)
+        await v._lease_expired()  # the expiry task, running after a fresh command came in
+        assert host.vehicles[0].mode == "OFFBOARD"
+        assert v.stream.active
+
+
 async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> None:
     async with emulated(1, vehicle={"link_timeout_s": 1.5}) as (host, [v]):
         ap = host.vehicles[0]
