@@ -381,8 +381,8 @@ class MavlinkVehicle:
         """Zero setpoints first, then offboard (PX4) / guided (ArduPilot), confirmed."""
         if self.mode_role == "offboard":
             return
-        if not self.stream.active:
-            self.stream.set(ZERO_VELOCITY)
+        # The lead-in is the daemon's own doing, not the agent's: keep it under one lease.
+        self.stream.set(ZERO_VELOCITY, lease_s=PRESTREAM_S + 2 * MODE_CONFIRM_S)
         await asyncio.sleep(PRESTREAM_S)
         self._require_link()
         await self._set_mode("offboard")

@@ -81,10 +81,11 @@ class SetpointStream:
                     await t
         self._task = self._expiry = None
 
-    def set(self, sp: Setpoint) -> None:
-        """Stream ``sp`` from now on (sent at once) and renew the lease."""
+    def set(self, sp: Setpoint, lease_s: float | None = None) -> None:
+        """Stream ``sp`` from now on (sent at once) and renew the lease (``lease_s``
+        overrides its length once, e.g. to cover the zero-setpoint lead-in to offboard)."""
         self.setpoint = sp
-        self._lease_until = time.monotonic() + self.lease_s
+        self._lease_until = time.monotonic() + (self.lease_s if lease_s is None else lease_s)
         self._emit(time.monotonic())
         self._wake.set()
 
