@@ -60,7 +60,13 @@ class EmulatorBridge:
                 break
             if time.monotonic() - started > self.timeout_s:
                 self.stats.mismatches += len(pending)
-                log.warning("declared setpoints never reached the autopilot: %s", sorted(pending))
+                for u, c in sorted(pending.items()):
+                    b, ap = self.host.world.body(u), self.host.vehicle(u)
+                    log.warning(
+                        "%s: declared %s never reached the autopilot (it holds %.3f, %.3f in %s)",
+                        u, "hold" if c.held else f"({c.vel[0]:.3f}, {c.vel[1]:.3f})",
+                        b.sp_n, b.sp_e, ap.mode,
+                    )  # fmt: skip
                 break
             await asyncio.sleep(0.002)
         self.stats.rounds += 1
