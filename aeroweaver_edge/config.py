@@ -112,7 +112,7 @@ class VehicleConfig(_Section):
     sysid: int | None = Field(default=None, ge=1, le=255)  # None: from the vehicle heartbeat
     signing_key: str | None = None  # MAVLink 2 key file (0600); timestamp kept beside it
     setpoint_hz: float = Field(default=20.0, ge=10.0, le=100.0)
-    lease_s: float = Field(default=2.0, gt=0, le=30.0)  # agent silence before autopilot hold
+    lease_s: float = Field(default=2.0, gt=0, le=120.0)  # agent silence before autopilot hold
     link_timeout_s: float = Field(default=2.5, ge=1.5, le=10.0)  # tolerates one lost 1 Hz heartbeat
     connect_timeout_s: float = Field(default=15.0, gt=0)
     command_timeout_s: float = Field(default=0.5, gt=0, le=10.0)  # per try, before a retry

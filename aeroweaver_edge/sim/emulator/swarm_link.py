@@ -92,6 +92,9 @@ async def emulated_swarm(
                 personality=personality if link == "mavlink" else "auto",
                 altitude_m=cfg.altitude_m,
                 sim_world=True,
+                # Lockstep: between its rounds a UAV waits for the (frozen) world, not for
+                # its agent; the world's round deadline bounds that wait, so the lease does.
+                lease_s=cfg.deadline_s + 5.0,
             )
             for i, (u, port) in enumerate(zip(uavs, ports, strict=True))
         }

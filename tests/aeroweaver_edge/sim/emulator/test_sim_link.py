@@ -55,3 +55,18 @@ async def test_mavsdk_link_matches_the_sim_link(reference: dict[str, object]) ->
     assert got["link"]["settle_mismatches"] == 0
     # MAVSDK uploaded the fence around the local origin: nobody breached it
     assert all(v["failsafes"] == [] for v in got["link"]["vehicles"].values())
+
+
+async def test_in_lockstep_the_lease_covers_the_worlds_round_deadline() -> None:
+    """A UAV that decided early waits for the slowest one while the world is frozen; its
+    command must still stand when the world steps (found with the embedded model)."""
+    from aeroweaver_edge.config import SimConfig
+    from aeroweaver_edge.sim.emulator.swarm_link import emulated_swarm
+    from aeroweaver_edge.sim.tasks import make_task
+
+    cfg = SimConfig(uavs=2, deadline_s=12.0)
+    async with emulated_swarm("mavlink", make_task("coverage", 2), cfg) as linked:
+        for v in linked.vehicles.values():
+            assert v.sim_world
+            assert v.lease_s > cfg.deadline_s
+        assert [v.sysid for v in linked.vehicles.values()] == [1, 2]
