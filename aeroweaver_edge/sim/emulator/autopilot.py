@@ -17,12 +17,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from aeroweaver_edge.sim.emulator.defaults import ARDUPILOT_PARAMS, PX4_PARAMS, TELEMETRY_S
+from aeroweaver_edge.sim.emulator.telemetry import encode
 from aeroweaver_edge.sim.world import KinematicWorld
 from aeroweaver_edge.vehicle.mavlink.codec import AUTOPILOT_COMPID, Codec, Message, mavlink
 from aeroweaver_edge.vehicle.mavlink.geo import DEFAULT_ORIGIN, GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.personality import (
     PARAM_INT32,
-    PARAM_REAL32,
     Personality,
 )
 
@@ -40,47 +41,6 @@ DUPLICATE_WINDOW_S = 5.0
 IGNORE_POSITION = 0x7  # type_mask bits: x, y, z ignored
 IGNORE_VELOCITY = 0x38  # vx, vy, vz ignored
 FORCE_DISARM = 21196.0
-
-# Parameter name -> (value, type). PX4's COM_OBL_RC_ACT factory default is 0 (Position
-# mode: hands control to RC sticks); the emulator starts with the project's approved
-# profile (5 = Hold) and ``--param`` can set the factory value to see the check refuse.
-PX4_PARAMS: dict[str, tuple[float, int]] = {
-    "COM_OF_LOSS_T": (1.0, PARAM_REAL32),
-    "COM_OBL_RC_ACT": (5, PARAM_INT32),
-    "GF_ACTION": (2, PARAM_INT32),
-    "GF_MAX_HOR_DIST": (0.0, PARAM_REAL32),
-    "GF_MAX_VER_DIST": (0.0, PARAM_REAL32),
-    "MIS_TAKEOFF_ALT": (2.5, PARAM_REAL32),
-    "MPC_TKO_SPEED": (1.5, PARAM_REAL32),
-    "MPC_LAND_SPEED": (0.7, PARAM_REAL32),
-    "NAV_DLL_ACT": (0, PARAM_INT32),
-    "RTL_RETURN_ALT": (30.0, PARAM_REAL32),
-    "MAV_SYS_ID": (1, PARAM_INT32),
-}
-ARDUPILOT_PARAMS: dict[str, tuple[float, int]] = {
-    "FENCE_ENABLE": (1, PARAM_INT32),
-    "FENCE_TYPE": (7, PARAM_INT32),
-    "FENCE_ACTION": (1, PARAM_INT32),
-    "FS_GCS_ENABLE": (1, PARAM_INT32),
-    "FS_GCS_TIMEOUT": (5.0, PARAM_REAL32),
-    "GUID_TIMEOUT": (3.0, PARAM_REAL32),
-    "WPNAV_SPEED_UP": (250.0, PARAM_REAL32),
-    "LAND_SPEED": (50.0, PARAM_REAL32),
-    "RTL_ALT": (1500.0, PARAM_REAL32),
-    "SYSID_THISMAV": (1, PARAM_INT32),
-}
-
-TELEMETRY_S: dict[int, float] = {
-    R.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    R.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    R.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
-    R.MAVLINK_MSG_ID_HOME_POSITION: 1.0,
-    R.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
-    R.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
-    R.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.1,
-    R.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.1,
-    R.MAVLINK_MSG_ID_ATTITUDE: 0.1,
-}
 
 
 @dataclass
@@ -223,7 +183,7 @@ class EmulatedAutopilot:
     def now(self) -> float:
         return time.monotonic()
 
-    def _ms(self) -> int:
+    def boot_ms(self) -> int:
         return int((time.monotonic() - self.t0) * 1000) & 0xFFFFFFFF
 
     def _event(self, text: str) -> None:
@@ -832,147 +792,13 @@ class EmulatedAutopilot:
         )
 
     def _send_message(self, msg_id: int) -> bool:
-        m = self.mav
-        b = self.world.body(self.uav)
-        ms = self._ms()
-        lat, lon = self.origin.to_global_e7(b.north, b.east)
-        amsl_mm = round((self.origin.alt_m + self.alt) * 1000)
         if msg_id == R.MAVLINK_MSG_ID_HEARTBEAT:
             self.send_heartbeat()
-        elif msg_id == R.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
-            self._send(
-                m.local_position_ned_encode(ms, b.north, b.east, -self.alt, b.vn, b.ve, self.vz)
-            )
-        elif msg_id == R.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
-            hdg = (
-                round(math.degrees(math.atan2(b.ve, b.vn)) % 360 * 100) if b.speed > 0.1 else 65535
-            )
-            self._send(
-                m.global_position_int_encode(
-                    ms,
-                    lat,
-                    lon,
-                    amsl_mm,
-                    round(self.alt * 1000),
-                    round(b.vn * 100),
-                    round(b.ve * 100),
-                    round(self.vz * 100),
-                    hdg,
-                )
-            )
-        elif msg_id == R.MAVLINK_MSG_ID_ATTITUDE:
-            yaw = math.atan2(b.ve, b.vn) if b.speed > 0.1 else 0.0
-            self._send(m.attitude_encode(ms, 0.0, 0.0, yaw, 0.0, 0.0, 0.0))
-        elif msg_id == R.MAVLINK_MSG_ID_SYS_STATUS:
-            sensors = (
-                R.MAV_SYS_STATUS_SENSOR_3D_GYRO
-                | R.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-                | R.MAV_SYS_STATUS_SENSOR_3D_MAG
-                | R.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-                | R.MAV_SYS_STATUS_SENSOR_GPS
-            )
-            health = sensors | R.MAV_SYS_STATUS_PREARM_CHECK
-            self._send(
-                m.sys_status_encode(
-                    sensors | R.MAV_SYS_STATUS_PREARM_CHECK,
-                    sensors | R.MAV_SYS_STATUS_PREARM_CHECK,
-                    health,
-                    100,
-                    16_000,
-                    500,
-                    90,
-                    0,
-                    0,
-                    0,
-                    0,
-                    0,
-                    0,
-                )
-            )
-        elif msg_id == R.MAVLINK_MSG_ID_GPS_RAW_INT:
-            self._send(
-                m.gps_raw_int_encode(
-                    ms * 1000,
-                    R.GPS_FIX_TYPE_3D_FIX,
-                    lat,
-                    lon,
-                    amsl_mm,
-                    80,
-                    120,
-                    round(b.speed * 100),
-                    65535,
-                    12,
-                )
-            )
-        elif msg_id == R.MAVLINK_MSG_ID_HOME_POSITION:
-            hlat, hlon = self.origin.to_global_e7(*self.home)
-            self._send(
-                m.home_position_encode(
-                    hlat,
-                    hlon,
-                    round(self.origin.alt_m * 1000),
-                    self.home[0],
-                    self.home[1],
-                    0.0,
-                    [1.0, 0.0, 0.0, 0.0],
-                    0.0,
-                    0.0,
-                    0.0,
-                    ms * 1000,
-                )
-            )
-        elif msg_id == R.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
-            self._send(m.extended_sys_state_encode(R.MAV_VTOL_STATE_UNDEFINED, self.landed))
-        elif msg_id == R.MAVLINK_MSG_ID_BATTERY_STATUS:
-            self._send(
-                m.battery_status_encode(
-                    0,
-                    R.MAV_BATTERY_FUNCTION_ALL,
-                    R.MAV_BATTERY_TYPE_LIPO,
-                    2500,
-                    [4000, 4000, 4000, 4000] + [65535] * 6,
-                    500,
-                    -1,
-                    -1,
-                    90,
-                )
-            )
-        elif msg_id == R.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            if self.faults.no_autopilot_version:
-                return False
-            caps = (
-                R.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-                | R.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | R.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | R.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-                | R.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-                | R.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE * (self.p.name == "px4")
-            )
-            self._send(
-                m.autopilot_version_encode(
-                    caps,
-                    (1 << 24) | (15 << 16),
-                    0,
-                    0,
-                    0,
-                    [0] * 8,
-                    [0] * 8,
-                    [0] * 8,
-                    0,
-                    0,
-                    self.sysid,
-                )
-            )
-        elif msg_id == R.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
-            self._send(
-                m.gps_global_origin_encode(
-                    round(self.origin.lat_deg * 1e7),
-                    round(self.origin.lon_deg * 1e7),
-                    round(self.origin.alt_m * 1000),
-                )
-            )
-        else:
+            return True
+        msg = encode(self, msg_id)
+        if msg is None:
             return False
+        self._send(msg)
         return True
 
 
