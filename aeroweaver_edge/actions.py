@@ -7,6 +7,7 @@ the safety gate and then to its own Vehicle port.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 from aeroweaver_edge.wire import Vec3
 
@@ -33,6 +34,18 @@ Motion = Hold | MoveTo | SetVelocity
 
 
 @dataclass(frozen=True)
+class VehicleAction:
+    """A change of the vehicle's flight state (not a motion): take off, land, return home.
+
+    The daemon's flight phases carry it out through the Vehicle port after an approval
+    check; the motion that goes with it is always Hold.
+    """
+
+    kind: Literal["takeoff", "land", "return_home"]
+    altitude_m: float | None = None  # take-off height; None: the mission flight level
+
+
+@dataclass(frozen=True)
 class Outgoing:
     """A directed message to a named peer (or ``"*"`` for every reachable peer)."""
 
@@ -46,6 +59,7 @@ class Intent:
     motion: Motion
     messages: tuple[Outgoing, ...] = ()
     memo: dict[str, str] = field(default_factory=dict)  # facts the skill wants kept (e.g. a guess)
+    action: VehicleAction | None = None  # flight: a vehicle action for the daemon's phases
 
 
 HOLD = Intent(Hold())

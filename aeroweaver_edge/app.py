@@ -11,7 +11,7 @@ import logging
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 
-from aeroweaver_edge.config import ConfigError, UavConfig
+from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.daemon import DaemonPorts, DaemonStats, UavDaemon
 from aeroweaver_edge.decision_round import RoundOutcome
 from aeroweaver_edge.mesh import Mesh
@@ -67,9 +67,10 @@ def _ports(
 
         link = SimLink(mesh, Keys(cfg.swarm), cfg.uav, headers)
         return DaemonPorts(link, link, link, link), link.start, link.aclose
-    raise ConfigError(
-        f"vehicle.backend: {cfg.vehicle.backend!r} is not available in this release; use 'sim'"
-    )
+    # flight: a real link (mavlink / mavsdk), in the field or against the simulated world.
+    from aeroweaver_edge.vehicle.flight_ports import flight_ports
+
+    return flight_ports(cfg, mesh, headers)
 
 
 async def run_daemon(
@@ -111,6 +112,9 @@ async def run_daemon(
             round_s=cfg.round_s,
             on_round=on_round,
         )
+        attach = getattr(ports.perception, "attach", None)
+        if attach is not None:  # field perception: peers come from the daemon's beacons
+            attach(lambda: daemon.neighbours)
         if on_ready is not None:
             on_ready(daemon)
         return await daemon.run()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib.util
 import logging
 import os
 import signal
@@ -32,6 +33,7 @@ from aeroweaver_edge.cli_checks import (
 )
 from aeroweaver_edge.cli_errors import ArgumentParser, report
 from aeroweaver_edge.config import MAX_UAVS, LLMConfig, UavConfig, load_config, parse_config
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.tasks import TASK_NAMES
 
 T = TypeVar("T")
@@ -103,6 +105,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
         check_memory_dir(Path(args.memory_dir))
     check_skills()
     llm = _llm_from_args(args) if args.selector == "llm" else LLMConfig()
+    if args.link == "mavsdk" and importlib.util.find_spec("mavsdk") is None:
+        raise UserError(
+            "--link mavsdk needs the optional MAVSDK extra",
+            "pip install 'aeroweaver-edge[mavsdk]', or use --link mavlink",
+        )
     opts = SwarmOptions(
         task=task,
         uavs=uavs,
@@ -117,6 +124,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         beta=args.beta,
         memory_dir=Path(args.memory_dir) if args.memory_dir else None,
         deadline_s=args.deadline,
+        link=args.link,
+        personality=args.personality,
     )
     view = None if args.quiet else LiveView()
     try:
@@ -307,7 +316,25 @@ def cmd_bench(args: argparse.Namespace) -> int:
         if args.in_process:
             argv.append("--in-process")
         return scale.main(argv)
+    if args.what == "mavlink":  # flight link: setpoint rate and command round trip
+        from aeroweaver_edge.bench import mavlink
+
+        return mavlink.main(["--seconds", str(args.seconds)])
     raise AssertionError(f"unknown benchmark {args.what!r}")  # argparse choices
+
+
+def cmd_signing_key(args: argparse.Namespace) -> int:
+    """flight: provision a MAVLink 2 signing key file (0600) for one vehicle."""
+    from aeroweaver_edge.vehicle.mavlink.signing import write_key
+
+    path = Path(args.path)
+    if path.exists() and not args.force:
+        print(f"aeroweaver: {path} exists; use --force to replace it", file=sys.stderr)
+        return 2
+    write_key(path)
+    print(f"wrote a 32-byte signing key to {path} (mode 0600); install the same key on the "
+          "autopilot over a wired link, never over radio")  # fmt: skip
+    return 0
 
 
 def _add_llm_flags(p: argparse.ArgumentParser) -> None:
@@ -372,6 +399,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
     s.add_argument("--quiet", action="store_true", help="no per-round view")
+    s.add_argument(
+        "--link", choices=["sim", "mavlink", "mavsdk"], default="sim",
+        help="vehicle link: in-process (sim) or real MAVLink bytes to emulated autopilots",
+    )  # fmt: skip
+    s.add_argument("--personality", choices=["px4", "ardupilot"], default="px4",
+                   help="emulated autopilot type (with --link mavlink)")  # fmt: skip
     _add_llm_flags(s)
     s.set_defaults(func=cmd_sim)
 
@@ -430,7 +463,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_security_parsers(sub)  # keys init|rotate|show, router
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=["memory", "memory-kill", "scale", "reference"])
+    b.add_argument("what", choices=["memory", "memory-kill", "scale", "reference", "mavlink"])
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
     b.add_argument("--kills", type=int_in(1), default=200, help="memory-kill: SIGKILLs")
     b.add_argument(
@@ -450,7 +483,17 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument(
         "--in-process", action="store_true", help="scale: daemons in one process (no RSS)"
     )
+    b.add_argument("--seconds", type=finite(), default=5.0, help="mavlink: streaming time")
     b.set_defaults(func=cmd_bench)
+
+    # flight: emulated autopilots and signing keys (docs/flight.md)
+    from aeroweaver_edge.sim.emulator.cli import add_parser as add_emulator
+
+    add_emulator(sub)
+    k = sub.add_parser("signing-key", help="create a MAVLink 2 signing key file (0600)")
+    k.add_argument("path")
+    k.add_argument("--force", action="store_true", help="replace an existing key file")
+    k.set_defaults(func=cmd_signing_key)
     return p
 
 

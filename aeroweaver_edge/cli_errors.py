@@ -57,6 +57,13 @@ def describe(exc: BaseException) -> tuple[int, str] | None:
                 "mesh.listen / --listen, or stop the process that holds it"
             )
         return 2, f"{text}; check mesh.listen, mesh.connect and mesh.namespace"
+    from aeroweaver_edge.vehicle.errors import VehicleError
+    from aeroweaver_edge.vehicle.mavlink.signing import SigningError
+
+    if isinstance(exc, VehicleError):  # the vehicle link could not be brought up
+        return 1, f"vehicle: {exc}"
+    if isinstance(exc, SigningError):
+        return 2, f"signing: {exc}"
     if isinstance(exc, LLMConfigError):
         return 2, f"{exc}; export it, or drop --api-key-env / llm.api_key_env"
     if isinstance(exc, MemoryUnavailable):

@@ -233,9 +233,72 @@ class SafetyConfig(_Section):
 
 
 class VehicleConfig(_Section):
+    """The UAV's own autopilot link and flight phases (docs/flight.md)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
     backend: Literal["sim", "mavlink", "mavsdk"] = "sim"
-    url: str | None = None  # e.g. udpin://0.0.0.0:14540 for mavlink
-    altitude_m: float = Field(default=d.ALTITUDE_M, gt=0)  # mission flight level
+    # mavlink: udpin://0.0.0.0:14540 (the autopilot sends to us) or udpout://HOST:PORT;
+    # mavsdk: any MAVSDK connection URL (udpin://, udpout://, tcpout://, serial://).
+    url: str | None = None
+    altitude_m: float = Field(default=d.ALTITUDE_M, gt=0, le=120)  # mission flight level (take-off)
+    personality: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: from the heartbeat
+    sysid: int | None = Field(default=None, ge=1, le=255)  # None: from the vehicle heartbeat
+    signing_key: str | None = None  # MAVLink 2 key file (0600); timestamp kept beside it
+    setpoint_hz: float = Field(default=20.0, ge=10.0, le=100.0)
+    lease_s: float = Field(default=2.0, gt=0, le=120.0)  # agent silence before autopilot hold
+    link_timeout_s: float = Field(default=2.5, ge=1.5, le=10.0)  # tolerates one lost 1 Hz heartbeat
+    connect_timeout_s: float = Field(default=15.0, gt=0)
+    command_timeout_s: float = Field(default=0.5, gt=0, le=10.0)  # per try, before a retry
+    command_retries: int = Field(default=4, ge=0, le=10)
+    failsafe_policy: Literal["warn", "refuse"] = "refuse"  # autopilot failsafe check at connect
+    upload_fence: bool = True  # the safety geofence, uploaded as the autopilot's fence
+    end_action: Literal["land", "return"] = "land"  # at mission end or operator stop
+    on_link_loss: Literal["failsafe", "land", "return"] = "failsafe"  # when the link is back
+    takeoff_timeout_s: float = Field(default=60.0, gt=0)
+    # Clock, perception and rewards from the simulated world (lockstep) while the vehicle
+    # flies over MAVLink/MAVSDK: ``aeroweaver sim --link mavlink``. Always on for "sim".
+    sim_world: bool = False
+
+    @model_validator(mode="after")
+    def _link(self) -> VehicleConfig:
+        if self.backend == "sim":
+            return self
+        if self.url is None:
+            raise ValueError(
+                f"url is required for backend {self.backend!r}, e.g. udpin://0.0.0.0:14540"
+            )
+        if self.backend == "mavlink":
+            from aeroweaver_edge.vehicle.mavlink.udp import UdpUrl
+
+            UdpUrl.parse(self.url)
+        elif "://" not in self.url:
+            raise ValueError(f"url {self.url!r} is not a MAVSDK connection URL (scheme://...)")
+        if self.lease_s < 2.0 / self.setpoint_hz:
+            raise ValueError(f"lease_s {self.lease_s} is shorter than two setpoint periods")
+        return self
+
+
+class FieldPoint(_Section):
+    """A known point of interest for a daemon flying without a simulator."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    id: str = Field(min_length=1, max_length=64)
+    kind: Literal["landmark", "waypoint"] = "waypoint"
+    north: float = Field(ge=-10_000, le=10_000)
+    east: float = Field(ge=-10_000, le=10_000)
+
+
+class FieldConfig(_Section):
+    """Rounds on the wall clock and perception from telemetry + peers' beacons (no sim)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    round_deadline_s: float = Field(default=25.0, gt=0)  # an LLM round may take this long
+    sensing_radius_m: float = Field(default=d.SENSING_RADIUS_M, gt=0)
+    beacon_max_age_s: float = Field(default=3.0, gt=0)  # by local receipt time
+    points: list[FieldPoint] = Field(default_factory=list, max_length=256)
 
 
 class UavConfig(_Section):
@@ -250,6 +313,7 @@ class UavConfig(_Section):
     agent: AgentConfig = AgentConfig()
     safety: SafetyConfig = SafetyConfig()
     vehicle: VehicleConfig = VehicleConfig()
+    field: FieldConfig = FieldConfig()
 
     @field_validator("uav")
     @classmethod

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
+from aeroweaver_edge.flight_phases import ApprovalPredicate, FlightPhases, default_approval
 from aeroweaver_edge.hold_reasons import count_causes
 from aeroweaver_edge.inbox import within
 from aeroweaver_edge.lifecycle import cancel_all
@@ -39,6 +40,7 @@ from aeroweaver_edge.wire import (
     Keys,
     MissionContext,
     ProgressReport,
+    StateBeacon,
 )
 
 if TYPE_CHECKING:
@@ -112,6 +114,7 @@ class UavDaemon:
         altitude_m: float = ALTITUDE_M,
         round_s: float = ROUND_S,
         on_round: Callable[[RoundOutcome], Awaitable[None]] | None = None,
+        approve: ApprovalPredicate = default_approval,
     ) -> None:
         self.cfg = cfg
         self.uav = cfg.uav
@@ -126,26 +129,48 @@ class UavDaemon:
         if ports.peers is None:
             from aeroweaver_edge.peers import PeerLink
 
-            self._peer_link = PeerLink(mesh, self.keys, cfg.uav, headers, cfg.mesh.comm_radius_m)
+            # A field daemon perceives its peers from their beacons (FieldPerception); in
+            # simulation the world tells each UAV what it senses, so beacons are not followed.
+            field = cfg.vehicle.backend != "sim" and not cfg.vehicle.sim_world
+            self._peer_link = PeerLink(
+                mesh, self.keys, cfg.uav, headers, cfg.mesh.comm_radius_m, track_neighbours=field
+            )
         self.link: PeerChannel = ports.peers or self._peer_link  # type: ignore[assignment]
         self._routed: tuple[str, str] | None = None
         self._on_round = on_round
         self._last_reward: float | None = None
         self._warmed: tuple[str, str] | None = None
         self._tasks: list[asyncio.Task[Any]] = []
+        # Flight phases (preflight, arm, take off, offboard, mission, land/return) wrap the
+        # Vehicle port; the round flies through them. ``approve`` gates vehicle actions.
+        self.phases = FlightPhases(
+            ports.vehicle,
+            uav=cfg.uav,
+            altitude_m=altitude_m,
+            end_action=cfg.vehicle.end_action,
+            on_link_loss=cfg.vehicle.on_link_loss,
+            takeoff_timeout_s=cfg.vehicle.takeoff_timeout_s,
+            approve=approve,
+        )
         self.rc = RoundContext(
             uav=cfg.uav,
             uav_index=uav_index,
             registry=registry,
             selector=selector,
             gate=SafetyGate(cfg.safety, horizon_s=round_s),
-            vehicle=ports.vehicle,
+            vehicle=self.phases,
             perception=ports.perception,
             link=self.link,
             agent=cfg.agent,
             memory=memory,
             altitude_m=altitude_m,
+            act=self.phases.act,
         )
+
+    @property
+    def neighbours(self) -> Mapping[str, StateBeacon]:
+        """Peers' latest beacons (followed by a field daemon's Zenoh link; else empty)."""
+        return self._peer_link.neighbours if self._peer_link is not None else {}
 
     async def _pump_context(self, sub: Subscription[MissionContext]) -> None:
         async for _key, msg in sub:
@@ -227,6 +252,11 @@ class UavDaemon:
                 if tick is None:
                     break
                 view = self.mission.view()
+                # Flight phases: launch once a mission is assigned; land/return when it ends.
+                if view is not None:
+                    await self.phases.launch()
+                elif self.phases.flying:
+                    await self.phases.finish("mission ended")
                 await self._warm(view)
                 self._route(view)
                 sent_before = _llm_requests(self.rc.selector)
@@ -239,11 +269,9 @@ class UavDaemon:
                 if self._on_round is not None:
                     await self._on_round(out)
         finally:
-            # Whatever ends the daemon (run over, Ctrl-C, SIGTERM, a bug), its body holds.
-            try:
-                await self.ports.vehicle.hold()
-            except Exception:
-                log.exception("%s: hold on shutdown failed", self.uav)
+            # Whatever ends the daemon (run over, Ctrl-C, SIGTERM, a bug), its body lands or
+            # returns if flying (vehicle.end_action), else holds. Never raises.
+            await self.phases.finish("daemon stopping")
             await cancel_all(self._tasks)
             if self._peer_link is not None:
                 await self._peer_link.aclose()

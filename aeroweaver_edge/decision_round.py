@@ -11,11 +11,11 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from aeroweaver_edge.actions import HOLD, Intent
+from aeroweaver_edge.actions import HOLD, Intent, VehicleAction
 from aeroweaver_edge.agent.candidates import CandidateSet, build_candidates
 from aeroweaver_edge.agent.describe import describe
 from aeroweaver_edge.agent.scoring import choose
@@ -89,6 +89,9 @@ class RoundContext:
     altitude_m: float = ALTITUDE_M
     inbox_wait_s: float = 1.0
     memo: dict[str, str] = field(default_factory=dict)
+    # flight: carries out a skill's vehicle action (take off, land, return) through the
+    # daemon's flight phases; returns why it was refused, or None when done.
+    act: Callable[[VehicleAction], Awaitable[str | None]] | None = None
 
 
 async def _advantages(
@@ -257,6 +260,10 @@ async def _decide_and_act(
     neighbours = [e.pos for e in obs.peers()]
     gated = rc.gate.gate(intent.motion, own.pos, neighbours)
     await _apply(rc, gated)
+    if intent.action is not None:  # flight: a vehicle action, after the phases' approval
+        refused = await rc.act(intent.action) if rc.act else "vehicle actions are not wired"
+        if refused is not None:
+            gated = GatedCommand(gated.vel, True, (*gated.violations, refused))
     rc.memo.update(intent.memo)
 
     # 6. Talk: one send per message; "*" reaches every peer the routing rule lets it reach.

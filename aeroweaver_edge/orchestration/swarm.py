@@ -61,6 +61,8 @@ class SwarmOptions:
     top_k: int = d.TOP_K  # task skills activated per UAV by the Commander (plus hold_position)
     swarm: str = "sim"
     measure_rss: bool = False  # read every daemon process's peak RSS before it exits
+    link: Literal["sim", "mavlink", "mavsdk"] = "sim"  # flight: real MAVLink to emulated autopilots
+    personality: str = "px4"  # the emulated autopilots' (with a mavlink/mavsdk link)
 
 
 @dataclass
@@ -98,6 +100,7 @@ class RunSummary:
     decision_cpu_s: dict[str, float] = field(default_factory=dict)
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
+    link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -143,6 +146,7 @@ class RunSummary:
             "run_id": self.run_id,
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
+            **({"link": self.link} if self.link else {}),
         }
 
 
@@ -286,7 +290,17 @@ async def run_swarm(
             if on_round is not None:
                 await on_round(log, board_ref["board"])
 
-        runner = WorldRunner(world_mesh, opts.swarm, task, sim_cfg, on_round=round_hook)
+        linked = None  # flight: emulated autopilots behind real MAVLink (docs/flight.md)
+        if opts.link != "sim":
+            from aeroweaver_edge.sim.emulator.swarm_link import emulated_swarm
+
+            linked = await stack.enter_async_context(
+                emulated_swarm(opts.link, task, sim_cfg, opts.personality)
+            )
+        runner = WorldRunner(
+            world_mesh, opts.swarm, task, sim_cfg, on_round=round_hook,
+            vehicles=linked.bridge if linked else None,
+        )  # fmt: skip
         await runner.start()
         stack.push_async_callback(runner.aclose)
         commander = Commander(cmdr_mesh, opts.swarm)
@@ -309,6 +323,7 @@ async def run_swarm(
                     run_id=summary.run_id,
                     share_experience=opts.share_experience,
                 ),
+                **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
             for u in uavs
         ]
@@ -341,6 +356,9 @@ async def run_swarm(
             raise
         if opts.measure_rss:
             summary.peak_rss_kb = daemons.peak_rss_kb()
+        if linked is not None:
+            summary.link = linked.report(opts.link)
+            linked.bridge.detach()  # landing after the run flies on the emulator's own clock
         runner.shutdown()
         await daemons.stop()
         failed = daemons.failed()

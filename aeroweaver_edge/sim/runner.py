@@ -50,6 +50,7 @@ from aeroweaver_edge.wire import (
 if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh
     from aeroweaver_edge.peers import PeerLink
+    from aeroweaver_edge.sim.emulator.bridge import EmulatorBridge
 
 log = logging.getLogger(__name__)
 
@@ -85,9 +86,12 @@ class WorldRunner:
         *,
         on_round: Callable[[RoundLog], Awaitable[None]] | None = None,
         comm_radius_m: float = COMM_RADIUS_M,
+        vehicles: EmulatorBridge | None = None,
     ) -> None:
         self.mesh = mesh
         self.comm_radius_m = comm_radius_m
+        # flight link (sim --link mavlink|mavsdk): emulated autopilots fly the bodies
+        self.vehicles = vehicles
         self.keys = Keys(swarm)
         self.task = task
         self.cfg = cfg
@@ -219,6 +223,8 @@ class WorldRunner:
     async def run_episode(self, episode: int) -> EpisodeResult:
         rng = np.random.default_rng(self.cfg.seed + episode)
         world = self.task.build_world(rng, self.cfg)
+        if self.vehicles is not None:  # flight link: the emulated autopilots fly this world
+            self.vehicles.attach(world)
         ep = Episode(self.task, world, self.cfg.max_rounds)
         self._publish_episode(episode, "start")
         expect: dict[str, list[MsgRef]] = defaultdict(list)
@@ -266,6 +272,10 @@ class WorldRunner:
                 for ref in cmd.sent:
                     for to in self._recipients(world, uav, ref):
                         expect[to].append(ref)
+            if self.vehicles is not None:
+                # flight link: the bodies move as the autopilots were told over MAVLink; wait
+                # until each declared setpoint has arrived, then hold only the silent UAVs.
+                orders = await self.vehicles.settle(commands, controlled)
             ep.apply_actions(scripted)
             ep.apply(orders, guesses)
             res = ep.advance()

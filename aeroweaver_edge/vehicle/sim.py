@@ -53,6 +53,11 @@ class SimLink:
         self._last_played: tuple[int, int] | None = None
         self._setpoint: Vec3 = ZERO
         self._held = True
+        # Flight phases: the simulated airframe starts disarmed on the ground and goes
+        # through arm and take-off like a real one. The world flies it at the fixed flight
+        # level either way (take-off happens before the first round), so returns are as before.
+        self.armed = False
+        self.in_air = False
         self._tasks: list[asyncio.Task[None]] = []
 
     async def start(self) -> None:
@@ -129,14 +134,16 @@ class SimLink:
     # Perception
     async def sense(self, tick: RoundTick) -> Percept:
         msg = self._require()
-        return Percept(VehicleState(msg.pos, msg.vel), msg.entities, msg.facts)
+        return Percept(
+            VehicleState(msg.pos, msg.vel, self.armed, self.in_air), msg.entities, msg.facts
+        )
 
     # RewardSource
     def drain(self) -> list[RewardEvent]:
         out, self._rewards = self._rewards, []
         return out
 
-    # Vehicle: the simulated airframe starts airborne at mission altitude.
+    # Vehicle: arm and take-off change only the phase flags (the world is planar).
     def _require(self) -> SimPerception:
         if self._current is None:
             raise RuntimeError(f"{self.uav}: no perception from the simulator yet")
@@ -144,16 +151,19 @@ class SimLink:
 
     async def state(self) -> VehicleState:
         msg = self._require()
-        return VehicleState(msg.pos, msg.vel)
+        return VehicleState(msg.pos, msg.vel, self.armed, self.in_air)
 
     async def arm(self) -> None:
-        return None
+        self.armed = True
 
     async def takeoff(self, altitude_m: float) -> None:
-        return None
+        if not self.armed:
+            raise RuntimeError(f"{self.uav}: take-off while disarmed")
+        self.in_air = True
 
     async def set_velocity(self, north: float, east: float, down: float) -> None:
-        self._setpoint, self._held = (north, east, down), False
+        if self.in_air:
+            self._setpoint, self._held = (north, east, down), False
 
     async def goto(self, north: float, east: float, down: float) -> None:
         raise NotImplementedError("the kinematic simulator flies velocity setpoints only")
@@ -163,9 +173,10 @@ class SimLink:
 
     async def land(self) -> None:
         await self.hold()
+        self.in_air = self.armed = False
 
     async def return_home(self) -> None:
-        await self.hold()
+        await self.land()
 
     async def health(self) -> Health:
         return Health(ok=self._current is not None, detail="sim")

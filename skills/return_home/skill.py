@@ -1,12 +1,12 @@
 """return_home: fly back to the launch point and land (return to launch).
 
-A vehicle action the Intent type cannot express yet: the executor returns Hold and the daemon
-is expected to map this skill to ``Vehicle.return_home()`` (see skill.md).
+A vehicle action: the executor returns Hold plus a ``VehicleAction`` that the daemon's flight
+phases carry out through ``Vehicle.return_home()`` after the approval check (see skill.md).
 """
 
 from __future__ import annotations
 
-from aeroweaver_edge.actions import HOLD, Intent
+from aeroweaver_edge.actions import Hold, Intent, VehicleAction
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "return_home"
@@ -22,4 +22,4 @@ def options(obs: Observation, ctx: SkillContext) -> list[Params]:
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
-    return HOLD
+    return Intent(Hold(), action=VehicleAction("return_home"))

@@ -1,14 +1,14 @@
 """take_off: climb from the ground to the flight altitude.
 
-A vehicle action the Intent type cannot express yet: the executor returns Hold and the daemon
-is expected to map this skill to ``Vehicle.takeoff(altitude_m)`` (see skill.md).
+A vehicle action: the executor returns Hold plus a ``VehicleAction`` that the daemon's flight
+phases carry out through ``Vehicle.takeoff(altitude_m)`` after the approval check (see skill.md).
 """
 
 from __future__ import annotations
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Intent
+from aeroweaver_edge.actions import Hold, Intent, VehicleAction
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "take_off"
@@ -29,4 +29,4 @@ def options(obs: Observation, ctx: SkillContext) -> list[Params]:
 
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
-    return HOLD
+    return Intent(Hold(), action=VehicleAction("takeoff", params.altitude_m))

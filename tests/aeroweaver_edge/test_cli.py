@@ -45,7 +45,7 @@ def test_daemon_with_a_typo_in_its_config_exits_2_naming_the_key(tmp_path: Path)
         ('uav = "UAV 0"\n', "uav"),
         ('uav = "uav0"\n[safety]\ngeofence_north_m = [70.0, -70.0]\n', "safety.geofence_north_m"),
         ('uav = "uav0"\n[mesh\n', "TOML"),
-        ('uav = "uav0"\n[vehicle]\nbackend = "mavlink"\n', "vehicle.backend"),
+        ('uav = "uav0"\n[vehicle]\nbackend = "mavlink"\n', "url is required for backend 'mavlink'"),
     ],
 )
 def test_daemon_config_errors_exit_2_in_process(

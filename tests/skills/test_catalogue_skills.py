@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from aeroweaver_edge.actions import HOLD, Hold, Intent, MoveTo, Outgoing
+from aeroweaver_edge.actions import HOLD, Hold, Intent, MoveTo, Outgoing, VehicleAction
 from aeroweaver_edge.observation import Observation, VehicleState
 from aeroweaver_edge.skill_api import SkillContext
 from aeroweaver_edge.skills import Skill, SkillParamError, SkillRegistry, load_skills
@@ -653,8 +653,15 @@ def test_vehicle_action_skills_hold_and_are_offered_in_the_right_state(
     offered, refused = (ground, air) if on_ground else (air, ground)
     [option] = skill.options(offered, ctx("any"))
     assert skill.options(refused, ctx("any")) == []
-    assert skill.execute(option, offered, ctx("any")) == HOLD
+    intent = skill.execute(option, offered, ctx("any"))
+    # The motion is a hold; the vehicle action goes to the daemon's flight phases.
+    assert intent.motion == HOLD.motion
+    assert intent.messages == ()
+    assert intent.action == VehicleAction(KIND[name])
     assert any("vehicle port" in c for c in skill.doc.conditions)
+
+
+KIND = {"take_off": "takeoff", "land": "land", "return_home": "return_home"}
 
 
 def test_take_off_altitude_is_bounded(reg: SkillRegistry) -> None:

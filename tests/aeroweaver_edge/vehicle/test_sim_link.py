@@ -96,6 +96,8 @@ async def test_the_command_carries_velocity_messages_and_guess(
     tick = await asyncio.wait_for(link.next_round(), 3.0)
     assert tick is not None
     sent = [MsgRef(sender="uav0", seq=3, to="*")]
+    await link.arm()  # the simulated airframe flies only once it took off (flight phases)
+    await link.takeoff(5.0)
     await link.set_velocity(3.0, -4.0, 0.0)
     await link.finish(tick, sent=sent, guess="2")
     assert await eventually(lambda: len(world.commands) == 1)
