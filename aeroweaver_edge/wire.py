@@ -73,11 +73,18 @@ class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
     ttl_rounds: int = 8
 
 
+MAX_CAUSES: Final = 64
+Cause = Annotated[str, msgspec.Meta(max_length=64)]
+Causes = Annotated[dict[Cause, int], msgspec.Meta(max_length=MAX_CAUSES)]
+"""Counts by a fixed cause name (e.g. payloads a receiver refused): small and bounded."""
+
+
 class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
-    """Per-round progress, or (``phase="ready"``) the ack that a UAV holds its assignment."""
+    """Per-round progress, (``phase="ready"``) the ack that a UAV holds its assignment, or
+    (``phase="final"``) the daemon's last counters as it stops."""
 
     h: Header
-    phase: Literal["round", "ready"] = "round"
+    phase: Literal["round", "ready", "final"] = "round"
     uav: str
     mission_id: str
     episode: int
@@ -100,6 +107,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     corrected: bool = False  # the experience correction changed the pick
     llm_calls: int = 0  # requests sent to the LLM endpoint this round (answered or not)
     llm_class: str = ""  # the selector's current logprob class (probe kind), if any
+    rejected: Causes = {}  # cumulative: everything this daemon refused, by cause
+    missing_messages: int = 0  # cumulative: expected messages that never came
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):

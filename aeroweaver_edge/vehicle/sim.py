@@ -5,12 +5,21 @@ The world sends each UAV its frozen perception (the round trigger, what it sense
 private facts); the UAV answers with one gated velocity setpoint, the list of peer messages
 it sent (so the world can tell each recipient what to wait for next round) and its guess,
 if a skill recorded one. A UAV that misses the world's deadline holds.
+
+Only the world speaks for the world: perception, rewards and episode events count only if
+their header names the world identity (authentic when the mesh verifies signatures) and
+they are for this UAV; a perception must be newer than the last one taken (one is kept
+pending, the newest: a flood cannot queue up), and a reward only counts once, for a round
+this UAV was sent a perception for and has not played past. Refusals are counted by cause
+in ``rejected``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
+from collections import Counter
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -32,6 +41,7 @@ if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh, Subscription
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
+WORLD = "world"  # the simulated world's identity (security.identity.WORLD)
 
 
 class SimLink:
@@ -45,7 +55,13 @@ class SimLink:
         self.uav = uav
         self._headers = headers
         self._reward_wait_s = reward_wait_s
-        self._ticks: asyncio.Queue[SimPerception | None] = asyncio.Queue()
+        # The newest perception not yet taken (None: none), and whether the run is over.
+        self._next: SimPerception | None = None
+        self._over = False
+        self._tick_ready = asyncio.Event()
+        self._taken: tuple[int, int] = (-1, -1)  # (episode, round) of the newest perception
+        self.rejected: Counter[str] = Counter()
+        self.superseded = 0  # perceptions replaced by a newer one before the daemon took them
         self._rewards: list[RewardEvent] = []
         self._reward_seen: set[tuple[int, int]] = set()
         self._reward_cond = asyncio.Condition()
@@ -73,26 +89,60 @@ class SimLink:
     async def aclose(self) -> None:
         await cancel_all(self._tasks)
 
+    def _refuse(self, why: str) -> None:
+        self.rejected[why] += 1
+
     async def _pump_perception(self, sub: Subscription[SimPerception]) -> None:
         async for _key, msg in sub:
-            if msg.uav == self.uav:
-                await self._ticks.put(msg)
+            where = (msg.episode, msg.round)
+            if msg.h.sender != WORLD:
+                self._refuse("perception_not_world")
+            elif msg.uav != self.uav:
+                self._refuse("perception_wrong_uav")
+            elif where <= self._taken:
+                self._refuse("perception_stale")
+            elif not all(math.isfinite(x) for x in (*msg.pos, *msg.vel, msg.deadline_s)):
+                self._refuse("perception_non_finite")
+            else:
+                self.superseded += self._next is not None  # the daemon fell behind
+                self._taken, self._next = where, msg
+                self._tick_ready.set()
+
+    def _reward_round(self, where: tuple[int, int]) -> bool:
+        """A reward counts for a round this UAV was sent a perception for, from the one it
+        played last on (a late daemon still gets the rewards of rounds it is behind on)."""
+        return (self._last_played or (-1, -1)) <= where <= self._taken
 
     async def _pump_rewards(self, sub: Subscription[SimReward]) -> None:
         async for _key, msg in sub:
-            if msg.uav != self.uav or (msg.episode, msg.round) in self._reward_seen:
-                continue
-            async with self._reward_cond:
-                self._reward_seen.add((msg.episode, msg.round))
-                self._rewards.append(
-                    RewardEvent(msg.episode, msg.round, msg.reward, msg.done, "sim")
-                )
-                self._reward_cond.notify_all()
+            where = (msg.episode, msg.round)
+            if msg.h.sender != WORLD:
+                self._refuse("reward_not_world")
+            elif msg.uav != self.uav:
+                self._refuse("reward_wrong_uav")
+            elif where in self._reward_seen:
+                self._refuse("reward_duplicate")
+            elif not self._reward_round(where):
+                self._refuse("reward_not_current")
+            elif not math.isfinite(msg.reward):
+                self._refuse("reward_non_finite")
+            else:
+                async with self._reward_cond:
+                    self._reward_seen.add(where)
+                    if len(self._reward_seen) > 8:  # only these rounds can still count
+                        self._reward_seen = {k for k in self._reward_seen if self._reward_round(k)}
+                    self._rewards.append(
+                        RewardEvent(msg.episode, msg.round, msg.reward, msg.done, "sim")
+                    )
+                    self._reward_cond.notify_all()
 
     async def _pump_episodes(self, sub: Subscription[SimEpisode]) -> None:
         async for _key, msg in sub:
-            if msg.phase == "shutdown":
-                await self._ticks.put(None)
+            if msg.h.sender != WORLD:
+                self._refuse("episode_not_world")
+            elif msg.phase == "shutdown":
+                self._over = True
+                self._tick_ready.set()
 
     async def _await_reward(self, key: tuple[int, int]) -> None:
         """Lockstep: a round's reward reaches the agent before its next round starts."""
@@ -103,7 +153,10 @@ class SimLink:
 
     # Clock
     async def next_round(self) -> RoundTick | None:
-        msg = await self._ticks.get()
+        while self._next is None and not self._over:
+            self._tick_ready.clear()
+            await self._tick_ready.wait()
+        msg, self._next = self._next, None
         if self._last_played is not None:
             await self._await_reward(self._last_played)
         if msg is None:
