@@ -72,7 +72,7 @@ class CommandCheck:
     def _refuse(
         self, key: str, cmd: SimCommand, where: tuple[int, int], taken: Collection[str]
     ) -> str | None:
-        if self.keys.uav_of(key) != cmd.uav or cmd.h.sender != cmd.uav:
+        if key != self.keys.sim_command(cmd.uav) or cmd.h.sender != cmd.uav:
             return "key_mismatch"
         if cmd.uav not in self.controlled:
             return "not_controlled"
