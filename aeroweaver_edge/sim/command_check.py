@@ -6,10 +6,10 @@ cannot assume a command came through a gate (a compromised or buggy daemon, or a
 an unsigned swarm). So the world, which owns the bodies, checks each command itself:
 
 refused (not buffered, so a genuine command for the same round still counts; counted by
-cause): ``key_mismatch`` (not on the commanding UAV's own key, or the header names someone
-else), ``not_controlled`` (a body the world flies, or no body at all), ``wrong_round``
-(late, early or foreign: only the current ``(episode, round)``), ``non_finite`` (NaN or
-infinite velocity), ``duplicate`` (a second command for the same round: the first valid one
+cause, in this order): ``key_mismatch`` (not on the commanding UAV's own key, or the header
+names someone else), ``not_controlled`` (a body the world flies, or no body at all),
+``non_finite`` (NaN or infinite velocity), ``wrong_round`` (late, early or foreign: only the
+current ``(episode, round)``), ``duplicate`` (a second command for the same round: the first valid one
 stands).
 
 bounded (applied, counted as clamped): ``speed`` (faster than the body's cap: scaled down
@@ -76,10 +76,10 @@ class CommandCheck:
             return "key_mismatch"
         if cmd.uav not in self.controlled:
             return "not_controlled"
-        if (cmd.episode, cmd.round) != where:
-            return "wrong_round"
         if not all(math.isfinite(x) for x in cmd.vel):
             return "non_finite"
+        if (cmd.episode, cmd.round) != where:
+            return "wrong_round"
         if cmd.uav in taken:
             return "duplicate"
         return None
