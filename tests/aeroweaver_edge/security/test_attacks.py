@@ -25,6 +25,7 @@ would already have arrived too (zenoh delivers a link's traffic in order).
 from __future__ import annotations
 
 import asyncio
+import io
 import math
 from collections import Counter
 from collections.abc import Awaitable, Callable
@@ -34,10 +35,12 @@ from typing import Any
 
 import pytest
 import zenoh
+from rich.console import Console
 
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.network import RunNetwork
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
+from aeroweaver_edge.orchestration.view import LiveView, print_summary
 from aeroweaver_edge.security.identity import SwarmPki, default_members
 from aeroweaver_edge.sim.runner import RoundLog
 from aeroweaver_edge.wire import (
@@ -81,6 +84,7 @@ class Campaign:
     nan_commands: int = 0
     replayed: int = 0
     flood: int = 0
+    view: str = ""  # what the live view printed during the attacked run
     sessions: list[zenoh.Session] = field(default_factory=list)  # closed after the run
     keep: list[Any] = field(default_factory=list)  # declarations alive for the run
 
@@ -101,10 +105,18 @@ def run_campaign(task: str, attack: Callable[[Campaign, list[RunNetwork]], Hook]
     baseline = asyncio.run(run_swarm(opts)).as_dict()
     camp = Campaign(baseline, {})
     nets: list[RunNetwork] = []
+    console = Console(file=io.StringIO(), width=400)
     try:
         camp.attacked = asyncio.run(
-            run_swarm(opts, fault=attack(camp, nets), on_network=nets.append)
+            run_swarm(
+                opts,
+                fault=attack(camp, nets),
+                on_network=nets.append,
+                on_round=LiveView(console).on_round,
+            )
         ).as_dict()
+        print_summary(camp.attacked, console)
+        camp.view = console.file.getvalue()  # type: ignore[attr-defined]
     finally:
         for session in camp.sessions:  # raw sessions with callbacks must be closed
             session.close()
@@ -379,6 +391,16 @@ def test_every_refusal_is_accounted_for(coverage: Campaign) -> None:
     )  # fmt: skip
     assert Counter(coverage.rejected) == expected
     assert coverage.attacked["security"]["rejected_total"] == sum(expected.values())
+
+
+def test_the_live_view_and_the_summary_say_what_was_refused(coverage: Campaign) -> None:
+    lines = coverage.view.splitlines()
+    refused = [ln for ln in lines if ln.startswith("  refused: ")]
+    assert any("world non_finite x1" in ln for ln in refused)
+    assert any(f"uav1 future_round x{FLOOD}" in ln for ln in refused)
+    assert any("uav2 " in ln and "wrong_key x1" in ln for ln in refused)
+    total = coverage.attacked["security"]["rejected_total"]
+    assert f"secured: tls, acl, signed; refused {total} (future_round x{FLOOD}" in coverage.view
 
 
 # -- private communication: forged ciphertexts ------------------------------------------
