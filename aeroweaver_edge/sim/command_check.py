@@ -9,8 +9,8 @@ refused (not buffered, so a genuine command for the same round still counts; cou
 cause, in this order): ``key_mismatch`` (not on the commanding UAV's own key, or the header
 names someone else), ``not_controlled`` (a body the world flies, or no body at all),
 ``non_finite`` (NaN or infinite velocity), ``wrong_round`` (late, early or foreign: only the
-current ``(episode, round)``), ``duplicate`` (a second command for the same round: the first valid one
-stands).
+current ``(episode, round)``), ``duplicate`` (a second command for the same round: the first
+valid one stands).
 
 bounded (applied, counted as clamped): ``speed`` (faster than the body's cap: scaled down
 along its direction, as the gate does) and ``geofence`` (a velocity whose one-round
