@@ -310,7 +310,8 @@ class UavDaemon:
             self._need_catch_up.clear()
             wait = first
             while True:
-                await self._catch_up()
+                with contextlib.suppress(MeshError):  # closing: the task is cancelled next
+                    await self._catch_up()
                 if self._caught_up() or not self.mission.commander_is_alive:
                     break
                 with contextlib.suppress(TimeoutError):

@@ -124,7 +124,7 @@ async def run_network(
 ) -> AsyncIterator[RunNetwork]:
     """The network of one run: ``secured_network`` or, with ``secure=False``, plain TCP."""
     if not secure:
-        yield insecure_network(namespace, [WORLD, COMMANDER, *uav_ids])
+        yield insecure_network(namespace, [WORLD, COMMANDER, CENTRAL, OBSERVER, *uav_ids])
         return
     async with secured_network(root, swarm, namespace, uav_ids) as net:
         yield net
