@@ -67,6 +67,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         beta=args.beta,
         memory_dir=Path(args.memory_dir) if args.memory_dir else None,
         deadline_s=args.deadline,
+        history_rounds=args.history,
+        state_context=args.state_text == "full",
     )
     view = None if args.quiet else LiveView()
     try:
@@ -170,6 +172,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
     raise SystemExit(f"unknown benchmark {args.what!r}")
 
 
+def _history_rounds(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of rounds") from None
+    if not 0 <= value <= 64:
+        raise argparse.ArgumentTypeError(f"{value} is outside 0..64")
+    return value
+
+
 def _add_llm_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--llm", metavar="URL", help="OpenAI-compatible base URL (default: embedded SmolLM2)"
@@ -199,6 +211,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--beta", type=float, default=0.8, help="experience correction weight (0: plain)"
     )
     s.add_argument("--top-k", type=int, default=8, help="task skills per UAV (with --mission)")
+    s.add_argument(
+        "--history", type=_history_rounds, default=8, metavar="ROUNDS",
+        help="interaction history in each agent's context, in blocks of ROUNDS (0: none)",
+    )  # fmt: skip
+    s.add_argument(
+        "--state-text", choices=["full", "observation"], default="full",
+        help="retrieval state: with peer messages and mission context (full) or without",
+    )  # fmt: skip
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
     s.add_argument("--deadline", type=float, default=30.0, help="seconds a round may take")
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")

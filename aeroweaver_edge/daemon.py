@@ -12,6 +12,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from aeroweaver_edge.agent.history import InteractionHistory
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.lifecycle import cancel_all
@@ -46,6 +47,7 @@ class DaemonStats:
     messages_sent: int = 0
     messages_dropped: int = 0
     prompt_tokens: int = 0
+    prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
     completion_tokens: int = 0
     llm_calls: int = 0
     corrected: int = 0
@@ -105,6 +107,9 @@ class UavDaemon:
             link=self.link,
             agent=cfg.agent,
             memory=memory,
+            history=(
+                InteractionHistory(cfg.agent.history_rounds) if cfg.agent.history_rounds else None
+            ),
             altitude_m=altitude_m,
             sensing_radius_m=sensing_radius_m,
         )
@@ -192,6 +197,10 @@ class UavDaemon:
                 out = await run_round(self.rc, tick, view)
                 await self.ports.clock.finish(tick, out.sent)
                 self._account(out)
+                if view is not None and self.rc.history is not None:
+                    self.rc.history.record_decision(
+                        out.episode, out.round, out.invocation, out.chosen_by_agent
+                    )
                 self._report(out, view)
                 await self._remember(out, view)
                 if self._on_round is not None:
@@ -224,6 +233,7 @@ class UavDaemon:
         s.corrected += out.corrected
         if out.scores is not None:
             s.prompt_tokens += out.scores.prompt_tokens
+            s.prompt_cached += out.scores.cached_tokens
             s.completion_tokens += out.scores.completion_tokens
             s.llm_calls += out.scores.prompt_tokens > 0 or out.scores.completion_tokens > 0
 
@@ -245,6 +255,7 @@ class UavDaemon:
                 hold_reason=out.hold_reason,
                 reward=self._last_reward,
                 prompt_tokens=sc.prompt_tokens if sc else 0,
+                prompt_cached=sc.cached_tokens if sc else 0,
                 completion_tokens=sc.completion_tokens if sc else 0,
                 latency_s=out.latency_s,
                 messages_sent=len(out.sent),
@@ -271,6 +282,8 @@ class UavDaemon:
     async def _absorb_rewards(self) -> None:
         for ev in self.ports.rewards.drain():
             self._last_reward = ev.reward
+            if self.rc.history is not None:
+                self.rc.history.record_reward(ev.episode, ev.round, ev.reward)
             if self.memory is None:
                 continue
             await self.memory.add_reward(self.uav, ev.episode, ev.round, ev.reward, ev.source)

@@ -15,6 +15,7 @@ from aeroweaver_edge.actions import HOLD, Intent
 from aeroweaver_edge.agent.candidates import CandidateSet, build_candidates
 from aeroweaver_edge.agent.describe import describe
 from aeroweaver_edge.agent.scoring import Choice, LabelScores, choose
+from aeroweaver_edge.agent.state_text import state_text as make_state_text
 from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.observation import MissionView, Observation
 from aeroweaver_edge.ports import DecisionRequest, Perception, RoundTick, Selector, Vehicle
@@ -23,6 +24,7 @@ from aeroweaver_edge.skill_api import SkillContext
 from aeroweaver_edge.wire import MsgRef, Vec3
 
 if TYPE_CHECKING:
+    from aeroweaver_edge.agent.history import InteractionHistory
     from aeroweaver_edge.agent.memory import AsyncExperienceMemory
     from aeroweaver_edge.peers import PeerLink
     from aeroweaver_edge.skills import SkillRegistry
@@ -69,6 +71,7 @@ class RoundContext:
     link: PeerLink
     agent: AgentConfig
     memory: AsyncExperienceMemory | None = None
+    history: InteractionHistory | None = None  # the agent's own past rounds, in its context
     altitude_m: float = 5.0
     sensing_radius_m: float = 45.0
     inbox_wait_s: float = 1.0
@@ -177,7 +180,7 @@ async def _decide_and_act(
     obs = Observation(
         rc.uav, tick.episode, tick.round, own, tuple(entities), tuple(messages), dict(rc.memo)
     )
-    state_text = describe(obs)
+    state_text = make_state_text(obs, view, context=rc.agent.state_context)
     if view is None:
         await rc.vehicle.hold()
         return _held(tick, "no mission assignment yet", state_text, started)
@@ -210,8 +213,9 @@ async def _decide_and_act(
         local_goal=view.local_goal,
         constraints=view.constraints,
         skill_docs=[rc.registry.get(s).prompt_text() for s in view.skills if s in rc.registry],
-        observation_text=state_text,
+        observation_text=describe(obs),
         candidates=cs.candidates,
+        history=None if rc.history is None else rc.history.lines(tick.episode, tick.round),
     )
     scores = await rc.selector.score(request)
     advantages = await _advantages(rc, view, state_text, cs)

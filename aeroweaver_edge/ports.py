@@ -94,6 +94,8 @@ class DecisionRequest:
     skill_docs: Sequence[str]
     observation_text: str
     candidates: Sequence[Candidate]
+    history: Sequence[str] | None = None
+    """The agent's own recent rounds (``agent.history``), oldest first; None: no history."""
 
 
 class Selector(Protocol):

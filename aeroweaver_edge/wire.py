@@ -82,6 +82,7 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     messages_dropped: int = 0
     decode_errors: int = 0  # cumulative payloads this daemon rejected
     corrected: bool = False  # the experience correction changed the pick
+    prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):

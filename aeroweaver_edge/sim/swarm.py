@@ -61,6 +61,8 @@ class SwarmOptions:
     mission_text: str | None = None
     top_k: int = 8  # task skills activated per UAV by the Commander (plus hold_position)
     swarm: str = "sim"
+    history_rounds: int = 8  # AgentConfig.history_rounds (0: no interaction history)
+    state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
 
 
 @dataclass
@@ -88,6 +90,7 @@ class RunSummary:
     tokens_by_agent: dict[str, int] = field(default_factory=dict)
     tokens_by_role: dict[str, int] = field(default_factory=dict)
     decision_latency_s: dict[str, float] = field(default_factory=dict)
+    tokens_per_decision: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -112,6 +115,7 @@ class RunSummary:
             "deadline_misses": self.deadline_misses,
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
+            "tokens_per_decision": self.tokens_per_decision,
             "tokens_by_agent": self.tokens_by_agent,
             "tokens_by_role": self.tokens_by_role,
             "decision_latency_s": self.decision_latency_s,
@@ -137,6 +141,18 @@ def _percentiles(xs: list[float]) -> dict[str, float]:
         return round(ys[min(len(ys) - 1, round(q * (len(ys) - 1)))], 4)
 
     return {"p50": at(0.5), "p95": at(0.95), "max": at(1.0)}
+
+
+def _per_decision(prompt: int, cached: int, completion: int, calls: int) -> dict[str, float]:
+    """Mean tokens per LLM decision; ``prompt_uncached`` is what the endpoint had to process."""
+    if not calls:
+        return {}
+    return {
+        "prompt": round(prompt / calls, 1),
+        "prompt_cached": round(cached / calls, 1),
+        "prompt_uncached": round((prompt - cached) / calls, 1),
+        "completion": round(completion / calls, 2),
+    }
 
 
 def free_port() -> int:
@@ -248,7 +264,8 @@ async def _shared_llm(opts: SwarmOptions) -> AsyncIterator[tuple[LLMConfig, str]
         return
     from aeroweaver_edge.llm.embedded import EmbeddedServer
 
-    async with EmbeddedServer() as server:
+    # One cache slot per UAV; run_swarm pins each daemon to its slot (LLMConfig.slot).
+    async with EmbeddedServer(n_parallel=max(1, opts.uavs)) as server:
         yield (
             opts.llm.model_copy(update={"base_url": server.base_url, "model": server.model}),
             "embedded",
@@ -331,16 +348,18 @@ async def run_swarm(
                 uav=u,
                 swarm=opts.swarm,
                 mesh=peer_mesh_cfg,
-                llm=llm,
+                llm=llm.model_copy(update={"slot": i}) if source == "embedded" else llm,
                 agent=AgentConfig(
                     selector=opts.selector,
                     beta=opts.beta,
                     gamma=opts.gamma,
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
                     share_experience=opts.share_experience,
+                    history_rounds=opts.history_rounds,
+                    state_context=opts.state_context,
                 ),
             )
-            for u in uavs
+            for i, u in enumerate(uavs)
         ]
         daemons = _Daemons(configs, opts.processes, tmp)
         stack.push_async_callback(daemons.stop)
@@ -396,9 +415,16 @@ async def run_swarm(
         )
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
+        cached = sum(p.prompt_cached for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
-        summary.tokens = {"prompt": prompt, "completion": completion, "total": prompt + completion}
+        summary.tokens = {
+            "prompt": prompt,
+            "prompt_cached": cached,
+            "completion": completion,
+            "total": prompt + completion,
+        }
         summary.llm_calls = sum(p.llm_calls for p in board.uavs.values())
+        summary.tokens_per_decision = _per_decision(prompt, cached, completion, summary.llm_calls)
         for e in summary.episodes:
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
         summary.tokens_by_agent = {
