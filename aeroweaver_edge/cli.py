@@ -69,6 +69,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         deadline_s=args.deadline,
         history_rounds=args.history,
         state_context=args.state_text == "full",
+        slots=True if args.llm_slots else None,
     )
     view = None if args.quiet else LiveView()
     try:
@@ -169,6 +170,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import memory
 
         return memory.main(["--records", str(args.records)])
+    if args.what == "llm_latency":
+        from aeroweaver_edge.bench import llm_latency
+
+        return llm_latency.main(["--uavs", str(args.uavs), "--rounds", str(args.rounds)])
     raise SystemExit(f"unknown benchmark {args.what!r}")
 
 
@@ -219,6 +224,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--state-text", choices=["full", "observation"], default="full",
         help="retrieval state: with peer messages and mission context (full) or without",
     )  # fmt: skip
+    s.add_argument(
+        "--llm-slots", action="store_true",
+        help="pin UAV i to cache slot i of a llama-server --llm endpoint (id_slot; the "
+        "embedded server always does); the server needs one slot per UAV (-np)",
+    )  # fmt: skip
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
     s.add_argument("--deadline", type=float, default=30.0, help="seconds a round may take")
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
@@ -254,8 +264,10 @@ def build_parser() -> argparse.ArgumentParser:
     pr.set_defaults(func=cmd_probe)
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("what", choices=["memory"])
-    b.add_argument("--records", type=int, default=10_000)
+    b.add_argument("what", choices=["memory", "llm_latency"])
+    b.add_argument("--records", type=int, default=10_000, help="memory: records to fill")
+    b.add_argument("--uavs", type=int, default=3, help="llm_latency: UAVs sharing the server")
+    b.add_argument("--rounds", type=int, default=24, help="llm_latency: rounds")
     b.set_defaults(func=cmd_bench)
     return p
 

@@ -2,7 +2,7 @@
 isolated interaction history").
 
 Every decision this UAV took in the current episode becomes one line of its context, e.g.
-``r4 explore_local() reward -1.23``. Two rules keep the prompt cache-friendly:
+``r4 explore_local() -1.23`` (round, action, reward). Two rules keep the prompt cache-friendly:
 
 * **Frozen lines.** A line is written the first time it is shown (the round after the
   decision, when lockstep has delivered its reward) and never changes afterwards, so from
@@ -41,7 +41,7 @@ def history_line(round_: int, invocation: str, chosen: bool, reward: float | Non
     if not chosen:
         text += " [no choice]"
     if reward is not None:
-        text += f" reward {_reward_text(reward)}"
+        text += f" {_reward_text(reward)}"
     return text
 
 

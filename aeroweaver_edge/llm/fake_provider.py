@@ -111,6 +111,7 @@ class RecordedRequest:
     path: str
     headers: dict[str, str]
     body: Any
+    cached_tokens: int | None = None  # what a chat answer reported as cached
 
 
 @dataclass
@@ -151,7 +152,7 @@ class FakeProvider:
         self.chat_calls = 0
         self.connections = 0  # TCP connections accepted (keep-alive reuses one)
         self._errors_served = 0
-        self._last_cached = 0
+        self._last_cached: int | None = None  # of the chat answer being built
         self._server: asyncio.Server | None = None
         self._conns: set[asyncio.Task[None]] = set()
         self._closing = asyncio.Event()
@@ -277,7 +278,8 @@ class FakeProvider:
         except ValueError:
             body = data.decode("utf-8", "replace")
         path = target.split("?", 1)[0]
-        self.requests.append(RecordedRequest(method, path, headers, body))
+        record = RecordedRequest(method, path, headers, body)
+        self.requests.append(record)
         keep = headers.get("connection", "").lower() != "close"
         policy = self._policy
         if path in ("/v1/chat/completions", "/chat/completions") and method == "POST":
@@ -287,6 +289,7 @@ class FakeProvider:
             if policy.delay_s:
                 await asyncio.sleep(policy.delay_s)
             answer = self._chat(policy, body)
+            record.cached_tokens = self._last_cached
             await self._send(writer, answer, keep, drip_s=policy.drip_s)
         else:
             await self._send(writer, self._route(method, path, policy, body), keep)
@@ -342,6 +345,7 @@ class FakeProvider:
 
     def _chat(self, policy: Policy, body: Any) -> _Answer:
         self.chat_calls += 1
+        self._last_cached = None
         if not isinstance(body, dict) or not isinstance(body.get("messages"), list):
             return _error(400, "messages: field required")
         if policy.status is not None and (
@@ -404,7 +408,7 @@ class FakeProvider:
             "usage": self._usage(policy, prompt, body.get("id_slot")),
         }
         if policy.llama_extras:
-            cache_n = self._last_cached
+            cache_n = self._last_cached or 0
             prompt_n = answer["usage"]["prompt_tokens"] - cache_n
             answer["timings"] = {"cache_n": cache_n, "prompt_n": prompt_n, "prompt_ms": 1.0,
                                  "prompt_per_second": 1000.0, "predicted_n": 1,

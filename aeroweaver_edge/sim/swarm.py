@@ -61,6 +61,7 @@ class SwarmOptions:
     mission_text: str | None = None
     top_k: int = 8  # task skills activated per UAV by the Commander (plus hold_position)
     swarm: str = "sim"
+    slots: bool | None = None  # pin UAV i to llama-server slot i; None: embedded server only
     history_rounds: int = 8  # AgentConfig.history_rounds (0: no interaction history)
     state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
 
@@ -343,12 +344,14 @@ async def run_swarm(
         if on_commander is not None:
             on_commander(commander)
 
+        pin_slots = source == "embedded" if opts.slots is None else opts.slots
+        pin_slots = pin_slots and source != "scripted"
         configs = [
             UavConfig(
                 uav=u,
                 swarm=opts.swarm,
                 mesh=peer_mesh_cfg,
-                llm=llm.model_copy(update={"slot": i}) if source == "embedded" else llm,
+                llm=llm.model_copy(update={"slot": i}) if pin_slots else llm,
                 agent=AgentConfig(
                     selector=opts.selector,
                     beta=opts.beta,

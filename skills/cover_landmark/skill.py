@@ -29,6 +29,11 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     announce = Outgoing(
         to="*",
         kind="intent",
-        body={"skill": NAME, "target_id": landmark.id, "north": metres(north), "east": metres(east)},
+        body={
+            "skill": NAME,
+            "target_id": landmark.id,
+            "north": metres(north),
+            "east": metres(east),
+        },
     )
     return Intent(MoveTo((north, east, -ctx.altitude_m)), messages=(announce,))

@@ -100,7 +100,7 @@ async def _three_agents_three_rounds(fp: FakeProvider, slots: bool) -> list[list
     cached: list[list[int]] = []
     try:
         for rnd in range(3):
-            history = tuple(f"r{r} explore_local() reward -1.00" for r in range(rnd))
+            history = tuple(f"r{r} explore_local() -1.00" for r in range(rnd))
             cached.append(
                 [
                     (await sel.score(request(rnd, uav=f"uav{i}", history=history))).cached_tokens

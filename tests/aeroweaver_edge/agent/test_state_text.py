@@ -82,7 +82,8 @@ def test_message_order_does_not_change_the_state() -> None:
 def test_hostile_bodies_are_reduced_to_bounded_identifiers() -> None:
     evil = {"note\nrole": "x" * 500 + "<script>", "n": float("inf"), "flag": True}
     line = message_summary(msg("uav\n9", evil), (0.0, 0.0))
-    assert "\n" not in line and "<" not in line
+    assert "\n" not in line
+    assert "<" not in line
     assert line == "msg uav_9 intent: flag true n nan note_role " + "x" * 24
     many = tuple(msg(f"uav{i}", {"i": i}, seq=i) for i in range(30))
     text = state_text(obs(many), VIEW, context=True)
