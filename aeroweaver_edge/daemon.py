@@ -14,6 +14,7 @@ from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from aeroweaver_edge.agent.history import InteractionHistory
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
@@ -68,6 +69,7 @@ class DaemonStats:
     messages_sent: int = 0
     messages_dropped: int = 0
     prompt_tokens: int = 0
+    prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
     completion_tokens: int = 0
     llm_calls: int = 0  # requests sent to the LLM endpoint, answered or not
     corrected: int = 0
@@ -163,6 +165,9 @@ class UavDaemon:
             link=self.link,
             agent=cfg.agent,
             memory=memory,
+            history=(
+                InteractionHistory(cfg.agent.history_rounds) if cfg.agent.history_rounds else None
+            ),
             altitude_m=altitude_m,
             act=self.phases.act,
         )
@@ -264,6 +269,10 @@ class UavDaemon:
                 await self.ports.clock.finish(tick, sent=out.sent, guess=out.guess)
                 calls = _llm_requests(self.rc.selector) - sent_before
                 self._account(out, calls)
+                if view is not None and self.rc.history is not None:
+                    self.rc.history.record_decision(
+                        out.episode, out.round, out.invocation, out.chosen_by_agent
+                    )
                 self._report(out, view, calls)
                 await self._remember(out, view)
                 if self._on_round is not None:
@@ -305,6 +314,7 @@ class UavDaemon:
         s.llm_calls += llm_calls
         if out.scores is not None:
             s.prompt_tokens += out.scores.prompt_tokens
+            s.prompt_cached += out.scores.cached_tokens
             s.completion_tokens += out.scores.completion_tokens
 
     def _report(self, out: RoundOutcome, view: MissionView | None, llm_calls: int) -> None:
@@ -327,6 +337,7 @@ class UavDaemon:
                 hold_cause=out.hold_cause,
                 reward=self._last_reward,
                 prompt_tokens=sc.prompt_tokens if sc else 0,
+                prompt_cached=sc.cached_tokens if sc else 0,
                 completion_tokens=sc.completion_tokens if sc else 0,
                 latency_s=out.latency_s,
                 cpu_s=out.cpu_s,
@@ -356,6 +367,8 @@ class UavDaemon:
     async def _absorb_rewards(self) -> None:
         for ev in self.ports.rewards.drain():
             self._last_reward = ev.reward
+            if self.rc.history is not None:
+                self.rc.history.record_reward(ev.episode, ev.round, ev.reward)
             if self.memory is None:
                 continue
             await self.memory.add_reward(self.uav, ev.episode, ev.round, ev.reward, ev.source)

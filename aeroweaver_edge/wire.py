@@ -100,6 +100,7 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     corrected: bool = False  # the experience correction changed the pick
     llm_calls: int = 0  # requests sent to the LLM endpoint this round (answered or not)
     llm_class: str = ""  # the selector's current logprob class (probe kind), if any
+    prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):

@@ -17,6 +17,7 @@ class UavProgress:
     reports: int = 0
     holds: int = 0
     prompt_tokens: int = 0
+    prompt_cached: int = 0  # of prompt_tokens, from the endpoint's prompt cache
     completion_tokens: int = 0
     messages_sent: int = 0
     messages_dropped: int = 0
@@ -54,6 +55,7 @@ class ProgressBoard:
         p.deadline_misses += rep.hold_cause == "deadline"
         p.llm_class = rep.llm_class or p.llm_class
         p.prompt_tokens += rep.prompt_tokens
+        p.prompt_cached += rep.prompt_cached
         p.completion_tokens += rep.completion_tokens
         p.messages_sent += rep.messages_sent
         p.messages_dropped += rep.messages_dropped

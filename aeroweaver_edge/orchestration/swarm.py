@@ -35,7 +35,7 @@ from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.orchestration.run_health import health_fields
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
-from aeroweaver_edge.tasks import create
+from aeroweaver_edge.tasks import create, get_spec
 from aeroweaver_edge.tasks.base import TaskDefinition
 from commander.commander import Commander
 from commander.plan import MissionPlan
@@ -63,6 +63,9 @@ class SwarmOptions:
     measure_rss: bool = False  # read every daemon process's peak RSS before it exits
     link: Literal["sim", "mavlink", "mavsdk"] = "sim"  # flight: real MAVLink to emulated autopilots
     personality: str = "px4"  # the emulated autopilots' (with a mavlink/mavsdk link)
+    slots: bool | None = None  # pin UAV i to llama-server slot i; None: embedded server only
+    history_rounds: int = d.HISTORY_ROUNDS  # AgentConfig.history_rounds (0: no history)
+    state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
 
 
 @dataclass
@@ -97,6 +100,7 @@ class RunSummary:
     tokens_by_agent: dict[str, int] = field(default_factory=dict)
     tokens_by_role: dict[str, int] = field(default_factory=dict)
     decision_latency_s: dict[str, float] = field(default_factory=dict)
+    tokens_per_decision: dict[str, float] = field(default_factory=dict)
     decision_cpu_s: dict[str, float] = field(default_factory=dict)
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
@@ -133,6 +137,7 @@ class RunSummary:
             "deadline_misses_by_side": self.deadline_misses_by_side,
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
+            "tokens_per_decision": self.tokens_per_decision,
             "tokens_by_agent": self.tokens_by_agent,
             "tokens_by_role": self.tokens_by_role,
             "decision_latency_s": self.decision_latency_s,
@@ -166,6 +171,18 @@ def percentiles(xs: Iterable[float]) -> dict[str, float]:
         return round(ys[min(len(ys) - 1, round(q * (len(ys) - 1)))], 4)
 
     return {"p50": at(0.5), "p95": at(0.95), "max": at(1.0)}
+
+
+def _per_decision(prompt: int, cached: int, completion: int, calls: int) -> dict[str, float]:
+    """Mean tokens per LLM request; ``prompt_uncached`` is what the endpoint had to process."""
+    if not calls:
+        return {}
+    return {
+        "prompt": round(prompt / calls, 1),
+        "prompt_cached": round(cached / calls, 1),
+        "prompt_uncached": round((prompt - cached) / calls, 1),
+        "completion": round(completion / calls, 2),
+    }
 
 
 def free_port() -> int:
@@ -227,8 +244,11 @@ async def run_swarm(
 ) -> RunSummary:
     started = time.monotonic()
     async with contextlib.AsyncExitStack() as stack:
+        # One embedded-server cache slot per UAV we expect to fly (the plan is not made yet:
+        # it may need the LLM); a larger mission shares slots round-robin.
+        n_slots = opts.uavs or get_spec(opts.task or "coverage").team_size
         llm, source = await stack.enter_async_context(
-            shared_llm(opts.llm, needed=opts.selector == "llm")
+            shared_llm(opts.llm, needed=opts.selector == "llm", n_parallel=n_slots)
         )
         if plan_factory is not None:
             plan = await plan_factory(uav_ids(opts.uavs or 3))
@@ -309,12 +329,14 @@ async def run_swarm(
         if on_commander is not None:
             on_commander(commander)
 
+        pin_slots = source == "embedded" if opts.slots is None else opts.slots
+        pin_slots = pin_slots and source != "scripted"
         configs = [
             UavConfig(
                 uav=u,
                 swarm=opts.swarm,
                 mesh=peer_mesh_cfg,
-                llm=llm,
+                llm=llm.model_copy(update={"slot": i % n_slots}) if pin_slots else llm,
                 agent=AgentConfig(
                     selector=opts.selector,
                     beta=opts.beta,
@@ -322,10 +344,12 @@ async def run_swarm(
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
                     run_id=summary.run_id,
                     share_experience=opts.share_experience,
+                    history_rounds=opts.history_rounds,
+                    state_context=opts.state_context,
                 ),
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
-            for u in uavs
+            for i, u in enumerate(uavs)
         ]
         daemons = DaemonSet(configs, opts.processes, tmp)
         stack.push_async_callback(daemons.stop)
@@ -389,8 +413,15 @@ async def run_swarm(
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
-        summary.tokens = {"prompt": prompt, "completion": completion, "total": prompt + completion}
+        cached = sum(p.prompt_cached for p in board.uavs.values())
+        summary.tokens = {
+            "prompt": prompt,
+            "prompt_cached": cached,
+            "completion": completion,
+            "total": prompt + completion,
+        }
         summary.llm_calls = health["llm_calls"]
+        summary.tokens_per_decision = _per_decision(prompt, cached, completion, summary.llm_calls)
         for e in summary.episodes:
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
         summary.tokens_by_agent = {
