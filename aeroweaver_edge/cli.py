@@ -101,6 +101,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         check_task(task or "coverage", uavs)
     if args.json:
         check_output_file(Path(args.json), "--json")
+    if args.trace:
+        check_output_file(Path(args.trace), "--trace")
     if args.memory_dir:
         check_memory_dir(Path(args.memory_dir))
     check_skills()
@@ -128,6 +130,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         personality=args.personality,
         history_rounds=args.history,
         state_context=args.state_text == "full",
+        trace_path=Path(args.trace) if args.trace else None,
         slots=True if args.llm_slots else None,
     )
     view = None if args.quiet else LiveView()
@@ -428,6 +431,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds a round may take (> 0)",
     )
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
+    s.add_argument(
+        "--trace", metavar="PATH", help="write the per-round trace as JSON Lines (docs/traces.md)"
+    )
     s.add_argument("--quiet", action="store_true", help="no per-round view")
     s.add_argument(
         "--link", choices=["sim", "mavlink", "mavsdk"], default="sim",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -36,6 +37,7 @@ from aeroweaver_edge.ports import (
 from aeroweaver_edge.safety_gate import SafetyGate
 from aeroweaver_edge.wire import (
     Assignment,
+    DecisionDetail,
     ExperienceRecord,
     HeaderFactory,
     Keys,
@@ -347,7 +349,26 @@ class UavDaemon:
                 corrected=out.corrected,
                 llm_calls=llm_calls,
                 llm_class=str(llm_class),
+                decision=self._decision(out),
             ),
+        )
+
+    def _decision(self, out: RoundOutcome) -> DecisionDetail | None:
+        """The round's options, scores and pick, rounded for the wire (None: no options)."""
+        if not out.options:
+            return None
+        sc = out.scores
+        bound = sc.omitted_bound if sc is not None else None
+        return DecisionDetail(
+            options=list(out.options),
+            base={k: round(v, 4) for k, v in (sc.logprobs.items() if sc else ())},
+            advantage={k: round(v, 4) for k, v in out.advantages.items()},
+            chosen=out.label,
+            reason=out.reason,
+            corrected=out.corrected,
+            beta=self.cfg.agent.beta,
+            text_label=sc.text_label if sc is not None else None,
+            omitted_bound=round(bound, 4) if bound is not None and math.isfinite(bound) else None,
         )
 
     async def _remember(self, out: RoundOutcome, view: MissionView | None) -> None:

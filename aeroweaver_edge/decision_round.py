@@ -72,6 +72,8 @@ class RoundOutcome:
     chosen_by_agent: bool = False  # False when an error, not the selector, produced the hold
     guess: str | None = None  # what a guessing skill recorded this round (the world scores it)
     hold_cause: HoldCause | None = None  # why it held (None: it did not)
+    options: tuple[str, ...] = ()  # "A. skill(args)" per candidate, when it got that far
+    advantages: Mapping[str, float] = field(default_factory=dict)  # label -> A (beta not applied)
 
 
 @dataclass
@@ -161,6 +163,8 @@ def _held(
     started: float,
     scores: LabelScores | None = None,
     n_candidates: int = 0,
+    options: tuple[str, ...] = (),
+    advantages: Mapping[str, float] | None = None,
 ) -> RoundOutcome:
     """A hold this UAV falls back to; not the selector's choice."""
     return RoundOutcome(
@@ -173,6 +177,8 @@ def _held(
         scores=scores,
         n_candidates=n_candidates,
         hold_cause=cause,
+        options=options,
+        advantages=dict(advantages or {}),
     )
 
 
@@ -244,6 +250,7 @@ async def _decide_and_act(
     scores = await rc.selector.score(request)
     advantages = await _advantages(rc, view, state_text, cs)
     choice = choose(scores, cs.labels, advantages, rc.agent.beta)
+    options = tuple(f"{c.label}. {c.text}" for c in cs.candidates)
     if choice.label is None:
         await rc.vehicle.hold()
         cause: HoldCause = "llm_failure" if scores.error is not None else "invalid_answer"
@@ -255,6 +262,8 @@ async def _decide_and_act(
             started,
             scores=scores,
             n_candidates=len(cs.candidates),
+            options=options,
+            advantages=advantages,
         )
     cand = next(c for c in cs.candidates if c.label == choice.label)
 
@@ -300,4 +309,6 @@ async def _decide_and_act(
         chosen_by_agent=True,
         guess=intent.memo.get("guess"),
         hold_cause=after_gate(gated.held, executed is None, gated.violations),
+        options=options,
+        advantages=advantages,
     )

@@ -38,13 +38,15 @@ class ProgressBoard:
     ready: dict[str, str] = field(default_factory=dict)  # uav -> role it acknowledged
     episode_tokens: dict[int, int] = field(default_factory=dict)  # decision tokens per episode
 
-    def add(self, rep: ProgressReport) -> None:
+    def add(self, rep: ProgressReport) -> bool:
+        """Take a report; False (counted in ``foreign``) if it is not for this mission or
+        its sender is not the reporting UAV."""
         if rep.mission_id != self.mission_id or rep.h.sender != rep.uav:
             self.foreign += 1
-            return
+            return False
         if rep.phase == "ready":
             self.ready[rep.uav] = rep.role
-            return
+            return True
         p = self.uavs.setdefault(rep.uav, UavProgress(rep.uav))
         p.role = rep.role
         p.last = rep
@@ -64,3 +66,4 @@ class ProgressBoard:
         p.cpu_s.append(rep.cpu_s)
         tokens = rep.prompt_tokens + rep.completion_tokens
         self.episode_tokens[rep.episode] = self.episode_tokens.get(rep.episode, 0) + tokens
+        return True

@@ -33,6 +33,7 @@ from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.orchestration.run_health import health_fields
+from aeroweaver_edge.orchestration.trace import TraceRecorder
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.tasks import create, get_spec
@@ -66,6 +67,7 @@ class SwarmOptions:
     slots: bool | None = None  # pin UAV i to llama-server slot i; None: embedded server only
     history_rounds: int = d.HISTORY_ROUNDS  # AgentConfig.history_rounds (0: no history)
     state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
+    trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
 
 
 @dataclass
@@ -101,6 +103,7 @@ class RunSummary:
     tokens_by_role: dict[str, int] = field(default_factory=dict)
     decision_latency_s: dict[str, float] = field(default_factory=dict)
     tokens_per_decision: dict[str, float] = field(default_factory=dict)
+    trace: str | None = None  # path of the per-round trace, when one was written
     decision_cpu_s: dict[str, float] = field(default_factory=dict)
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
@@ -151,6 +154,7 @@ class RunSummary:
             "run_id": self.run_id,
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
+            "trace": self.trace,
             **({"link": self.link} if self.link else {}),
         }
 
@@ -228,6 +232,27 @@ def _episode_dict(ep: int, res: EpisodeResult, task: TaskDefinition) -> dict[str
     }
 
 
+def _trace_header(summary: RunSummary, opts: SwarmOptions, cfg: SimConfig) -> dict[str, Any]:
+    """What a trace reader needs before the first round: who flies what, and where."""
+    return {
+        "task": summary.task,
+        "seed": summary.seed,
+        "uavs": summary.uavs,
+        "selector": summary.selector,
+        "model": summary.model,
+        "note": summary.note,
+        "run_id": summary.run_id,
+        "roles": summary.roles,
+        "mission": summary.mission,
+        "beta": opts.beta,
+        "round_s": cfg.round_s,
+        "max_rounds": cfg.max_rounds,
+        "arena_half_m": d.ARENA_HALF_M,
+        "sensing_radius_m": cfg.sensing_radius_m,
+        "comm_radius_m": d.COMM_RADIUS_M,
+    }
+
+
 def world_task(plan: MissionPlan, max_rounds: int) -> TaskDefinition:
     """The task definition the world flies for ``plan``: its task, its UAVs and roles."""
     roles = {u: plan.assignments[u].role for u in sorted(plan.assignments, key=natural)}
@@ -302,7 +327,13 @@ async def run_swarm(
 
         board_ref: dict[str, ProgressBoard] = {}
 
+        recorder = None
+        if opts.trace_path is not None:
+            recorder = TraceRecorder(opts.trace_path, _trace_header(summary, opts, sim_cfg))
+
         async def round_hook(log: RoundLog) -> None:
+            if recorder is not None:
+                recorder.on_round(log)
             summary.round_wall_s.append(log.wall_s)
             summary.deliveries += log.deliveries
             if fault is not None:
@@ -324,6 +355,8 @@ async def run_swarm(
         await runner.start()
         stack.push_async_callback(runner.aclose)
         commander = Commander(cmdr_mesh, opts.swarm)
+        if recorder is not None:
+            commander.report_listeners.append(recorder.on_report)
         await commander.start()
         stack.push_async_callback(commander.aclose)
         if on_commander is not None:
@@ -370,6 +403,8 @@ async def run_swarm(
             for ep in range(opts.episodes):
                 result = await runner.run_episode(ep)
                 summary.episodes.append(_episode_dict(ep, result, task))
+                if recorder is not None:
+                    recorder.on_episode(ep, result)
                 if ep + 1 < opts.episodes:
                     # Let finalised experience reach same-role peers before the next episode.
                     await asyncio.sleep(0.3)
@@ -436,6 +471,8 @@ async def run_swarm(
             [x for p in board.uavs.values() for x in p.latencies_s]
         )
         summary.decision_cpu_s = percentiles([x for p in board.uavs.values() for x in p.cpu_s])
+        if recorder is not None:
+            summary.trace = str(recorder.write())
     summary.wall_s = time.monotonic() - started
     return summary
 
