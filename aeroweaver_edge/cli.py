@@ -108,6 +108,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         check_task(task or "coverage", uavs)
     if args.json:
         check_output_file(Path(args.json), "--json")
+    if args.trace:
+        check_output_file(Path(args.trace), "--trace")
     if args.memory_dir:
         check_memory_dir(Path(args.memory_dir))
     check_skills()
@@ -133,6 +135,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
         deadline_s=args.deadline,
         link=args.link,
         personality=args.personality,
+        history_rounds=args.history,
+        state_context=args.state_text == "full",
+        trace_path=Path(args.trace) if args.trace else None,
+        slots=True if args.llm_slots else None,
         secure=not args.insecure,
     )
     view = None if args.quiet else LiveView()
@@ -379,6 +385,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         argv = ["--cases", str(args.cases), "--seed", str(args.seed)]
         return fuzz_wire.main([*argv, *(["--insecure"] if args.insecure else [])])
+    if args.what == "llm_latency":
+        from aeroweaver_edge.bench import llm_latency
+
+        return llm_latency.main(["--uavs", str(args.uavs), "--rounds", str(args.rounds)])
     raise AssertionError(f"unknown benchmark {args.what!r}")  # argparse choices
 
 
@@ -394,6 +404,16 @@ def cmd_signing_key(args: argparse.Namespace) -> int:
     print(f"wrote a 32-byte signing key to {path} (mode 0600); install the same key on the "
           "autopilot over a wired link, never over radio")  # fmt: skip
     return 0
+
+
+def _history_rounds(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of rounds") from None
+    if not 0 <= value <= 64:
+        raise argparse.ArgumentTypeError(f"{value} is outside 0..64")
+    return value
 
 
 def _add_llm_flags(p: argparse.ArgumentParser) -> None:
@@ -449,6 +469,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"
     )
+    s.add_argument(
+        "--history", type=_history_rounds, default=defaults.HISTORY_ROUNDS, metavar="ROUNDS",
+        help="interaction history in each agent's context, in blocks of ROUNDS (0: none)",
+    )  # fmt: skip
+    s.add_argument(
+        "--state-text", choices=["full", "observation"], default="full",
+        help="retrieval state: with peer messages and mission context (full) or without",
+    )  # fmt: skip
+    s.add_argument(
+        "--llm-slots", action="store_true",
+        help="pin UAV i to cache slot i of a llama-server --llm endpoint (id_slot; the "
+        "embedded server always does); the server needs one slot per UAV (-np)",
+    )  # fmt: skip
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
     s.add_argument(
         "--deadline",
@@ -457,6 +490,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds a round may take (> 0)",
     )
     s.add_argument("--json", metavar="PATH", help="write the run summary as JSON")
+    s.add_argument(
+        "--trace", metavar="PATH", help="write the per-round trace as JSON Lines (docs/traces.md)"
+    )
     s.add_argument("--quiet", action="store_true", help="no per-round view")
     s.add_argument(
         "--link", choices=["sim", "mavlink", "mavsdk"], default="sim",
@@ -534,7 +570,16 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument(
         "what",
-        choices=["memory", "memory-kill", "scale", "reference", "mavlink", "security", "fuzz"],
+        choices=[
+            "memory",
+            "memory-kill",
+            "scale",
+            "reference",
+            "mavlink",
+            "llm_latency",
+            "security",
+            "fuzz",
+        ],
     )
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
     b.add_argument("--kills", type=int_in(1), default=200, help="memory-kill: SIGKILLs")
@@ -547,7 +592,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--task", choices=TASK_NAMES, default="coverage", help="scale, security: task")
     b.add_argument(
-        "--rounds", type=int_in(1), default=defaults.MAX_ROUNDS, help="scale: rounds per run"
+        "--rounds",
+        type=int_in(1),
+        default=defaults.MAX_ROUNDS,
+        help="scale, llm_latency, security: rounds per run",
     )
     b.add_argument("--seed", type=int, default=1, help="scale: layout seed")
     b.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="reference: seeds")
@@ -556,6 +604,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--in-process", action="store_true", help="scale: daemons in one process (no RSS)"
     )
     b.add_argument("--seconds", type=finite(), default=5.0, help="mavlink: streaming time")
+    b.add_argument("--uavs", type=int, default=3, help="llm_latency: UAVs sharing the server")
     b.add_argument("--cases", type=int_in(1), default=100_000, help="fuzz: payloads")
     b.add_argument("--insecure", action="store_true", help="fuzz: no signature layer")
     b.set_defaults(func=cmd_bench)

@@ -169,6 +169,9 @@ class LLMConfig(_Section):
     breaker_reset_s: float = Field(default=10.0, gt=0)
     top_logprobs: int = Field(default=20, ge=1, le=20)
     temperature: float = Field(default=0.0, ge=0)
+    # llama-server cache slot this daemon's decisions pin to (sent as ``id_slot``), so its
+    # prompt prefix stays in its own KV cache. None: let the server choose (hosted APIs).
+    slot: int | None = Field(default=None, ge=0)
 
 
 class AgentConfig(_Section):
@@ -187,6 +190,12 @@ class AgentConfig(_Section):
     run_id: str | None = Field(default=None, min_length=1, max_length=64)
     share_experience: bool = True
     max_labels: int = Field(default=26, ge=2, le=26)
+    # Interaction history in the agent's context (paper §3.2): its own recent decisions and
+    # rewards, in blocks of this many rounds so the prompt stays append-only. 0: none.
+    history_rounds: int = Field(default=d.HISTORY_ROUNDS, ge=0, le=64)
+    # The state text for experience retrieval holds received peer messages and the mission
+    # context (role, goal, private facts) as in paper §3.3. False: pose and entities only.
+    state_context: bool = True
 
     @field_validator("run_id")
     @classmethod

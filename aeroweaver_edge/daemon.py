@@ -17,11 +17,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from collections import Counter
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from aeroweaver_edge.agent.history import InteractionHistory
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
@@ -45,6 +47,7 @@ from aeroweaver_edge.safety_gate import SafetyGate
 from aeroweaver_edge.wire import (
     MAX_CAUSES,
     Assignment,
+    DecisionDetail,
     ExperienceRecord,
     HeaderFactory,
     Keys,
@@ -80,6 +83,7 @@ class DaemonStats:
     messages_sent: int = 0
     messages_dropped: int = 0
     prompt_tokens: int = 0
+    prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
     completion_tokens: int = 0
     llm_calls: int = 0  # requests sent to the LLM endpoint, answered or not
     corrected: int = 0
@@ -178,6 +182,9 @@ class UavDaemon:
             link=self.link,
             agent=cfg.agent,
             memory=memory,
+            history=(
+                InteractionHistory(cfg.agent.history_rounds) if cfg.agent.history_rounds else None
+            ),
             altitude_m=altitude_m,
             act=self.phases.act,
         )
@@ -364,6 +371,10 @@ class UavDaemon:
                 await self.ports.clock.finish(tick, sent=out.sent, guess=out.guess)
                 calls = _llm_requests(self.rc.selector) - sent_before
                 self._account(out, calls)
+                if view is not None and self.rc.history is not None:
+                    self.rc.history.record_decision(
+                        out.episode, out.round, out.invocation, out.chosen_by_agent
+                    )
                 self._report(out, view, calls)
                 await self._remember(out, view)
                 if self._on_round is not None:
@@ -405,6 +416,7 @@ class UavDaemon:
         s.llm_calls += llm_calls
         if out.scores is not None:
             s.prompt_tokens += out.scores.prompt_tokens
+            s.prompt_cached += out.scores.cached_tokens
             s.completion_tokens += out.scores.completion_tokens
 
     def _report(self, out: RoundOutcome, view: MissionView | None, llm_calls: int) -> None:
@@ -427,6 +439,7 @@ class UavDaemon:
                 hold_cause=out.hold_cause,
                 reward=self._last_reward,
                 prompt_tokens=sc.prompt_tokens if sc else 0,
+                prompt_cached=sc.cached_tokens if sc else 0,
                 completion_tokens=sc.completion_tokens if sc else 0,
                 latency_s=out.latency_s,
                 cpu_s=out.cpu_s,
@@ -435,8 +448,27 @@ class UavDaemon:
                 corrected=out.corrected,
                 llm_calls=llm_calls,
                 llm_class=str(llm_class),
+                decision=self._decision(out),
                 **self._counters(),
             ),
+        )
+
+    def _decision(self, out: RoundOutcome) -> DecisionDetail | None:
+        """The round's options, scores and pick, rounded for the wire (None: no options)."""
+        if not out.options:
+            return None
+        sc = out.scores
+        bound = sc.omitted_bound if sc is not None else None
+        return DecisionDetail(
+            options=list(out.options),
+            base={k: round(v, 4) for k, v in (sc.logprobs.items() if sc else ())},
+            advantage={k: round(v, 4) for k, v in out.advantages.items()},
+            chosen=out.label,
+            reason=out.reason,
+            corrected=out.corrected,
+            beta=self.cfg.agent.beta,
+            text_label=sc.text_label if sc is not None else None,
+            omitted_bound=round(bound, 4) if bound is not None and math.isfinite(bound) else None,
         )
 
     async def _remember(self, out: RoundOutcome, view: MissionView | None) -> None:
@@ -456,6 +488,8 @@ class UavDaemon:
     async def _absorb_rewards(self) -> None:
         for ev in self.ports.rewards.drain():
             self._last_reward = ev.reward
+            if self.rc.history is not None:
+                self.rc.history.record_reward(ev.episode, ev.round, ev.reward)
             if self.memory is None:
                 continue
             await self.memory.add_reward(self.uav, ev.episode, ev.round, ev.reward, ev.source)

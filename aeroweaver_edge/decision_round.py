@@ -19,6 +19,7 @@ from aeroweaver_edge.actions import HOLD, Intent, VehicleAction
 from aeroweaver_edge.agent.candidates import CandidateSet, build_candidates
 from aeroweaver_edge.agent.describe import describe
 from aeroweaver_edge.agent.scoring import choose
+from aeroweaver_edge.agent.state_text import state_text as make_state_text
 from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.defaults import ALTITUDE_M, HOLD_SKILL
 from aeroweaver_edge.hold_reasons import HoldCause, after_gate
@@ -37,6 +38,7 @@ from aeroweaver_edge.skill_api import SkillContext
 from aeroweaver_edge.wire import MsgRef, Vec3
 
 if TYPE_CHECKING:
+    from aeroweaver_edge.agent.history import InteractionHistory
     from aeroweaver_edge.agent.memory import AsyncExperienceMemory
     from aeroweaver_edge.skills import SkillRegistry
 
@@ -70,6 +72,8 @@ class RoundOutcome:
     chosen_by_agent: bool = False  # False when an error, not the selector, produced the hold
     guess: str | None = None  # what a guessing skill recorded this round (the world scores it)
     hold_cause: HoldCause | None = None  # why it held (None: it did not)
+    options: tuple[str, ...] = ()  # "A. skill(args)" per candidate, when it got that far
+    advantages: Mapping[str, float] = field(default_factory=dict)  # label -> A (beta not applied)
 
 
 @dataclass
@@ -86,6 +90,7 @@ class RoundContext:
     link: PeerChannel
     agent: AgentConfig
     memory: AsyncExperienceMemory | None = None
+    history: InteractionHistory | None = None  # the agent's own past rounds, in its context
     altitude_m: float = ALTITUDE_M
     inbox_wait_s: float = 1.0
     memo: dict[str, str] = field(default_factory=dict)
@@ -158,6 +163,8 @@ def _held(
     started: float,
     scores: LabelScores | None = None,
     n_candidates: int = 0,
+    options: tuple[str, ...] = (),
+    advantages: Mapping[str, float] | None = None,
 ) -> RoundOutcome:
     """A hold this UAV falls back to; not the selector's choice."""
     return RoundOutcome(
@@ -170,6 +177,8 @@ def _held(
         scores=scores,
         n_candidates=n_candidates,
         hold_cause=cause,
+        options=options,
+        advantages=dict(advantages or {}),
     )
 
 
@@ -199,7 +208,7 @@ async def _decide_and_act(
         memo=dict(rc.memo),
         facts=dict(percept.facts),
     )
-    state_text = describe(obs)
+    state_text = make_state_text(obs, view, context=rc.agent.state_context)
     if view is None:
         await rc.vehicle.hold()
         return _held(tick, "no mission assignment yet", "no_assignment", state_text, started)
@@ -233,13 +242,15 @@ async def _decide_and_act(
         local_goal=view.local_goal,
         constraints=view.constraints,
         skill_docs=[rc.registry.get(s).prompt_text() for s in view.skills if s in rc.registry],
-        observation_text=state_text,
+        observation_text=describe(obs),
         candidates=cs.candidates,
         task=view.task,
+        history=None if rc.history is None else rc.history.lines(tick.episode, tick.round),
     )
     scores = await rc.selector.score(request)
     advantages = await _advantages(rc, view, state_text, cs)
     choice = choose(scores, cs.labels, advantages, rc.agent.beta)
+    options = tuple(f"{c.label}. {c.text}" for c in cs.candidates)
     if choice.label is None:
         await rc.vehicle.hold()
         cause: HoldCause = "llm_failure" if scores.error is not None else "invalid_answer"
@@ -251,6 +262,8 @@ async def _decide_and_act(
             started,
             scores=scores,
             n_candidates=len(cs.candidates),
+            options=options,
+            advantages=advantages,
         )
     cand = next(c for c in cs.candidates if c.label == choice.label)
 
@@ -296,4 +309,6 @@ async def _decide_and_act(
         chosen_by_agent=True,
         guess=intent.memo.get("guess"),
         hold_cause=after_gate(gated.held, executed is None, gated.violations),
+        options=options,
+        advantages=advantages,
     )

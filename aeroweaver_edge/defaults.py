@@ -39,6 +39,8 @@ GAMMA: Final = 0.95
 """Discount of the stored returns."""
 NEIGHBOURHOOD: Final = 32
 """Experience records retrieved per decision."""
+HISTORY_ROUNDS: Final = 8
+"""Rounds of its own interaction history each agent keeps in its context (0: none)."""
 HOLD_SKILL: Final = "hold_position"
 """The skill every UAV always has, and what any invalid choice becomes."""
 

@@ -8,7 +8,7 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -30,8 +30,16 @@ def dumps(value: Any, *, indent: int | None = 2) -> str:
 
 
 def write_json_file(path: Path, value: Any) -> None:
+    _write_text(path, dumps(value) + "\n")
+
+
+def write_jsonl_file(path: Path, rows: Iterable[Any]) -> None:
+    """JSON Lines (one strict JSON object per line), written atomically like the above."""
+    _write_text(path, "".join(dumps(row, indent=None) + "\n" for row in rows))
+
+
+def _write_text(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = dumps(value) + "\n"
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:

@@ -114,6 +114,8 @@ class DecisionRequest:
     observation_text: str
     candidates: Sequence[Candidate]
     task: str = ""  # the mission's task type (what a task's reference policy is looked up by)
+    history: Sequence[str] | None = None
+    """The agent's own recent rounds (``agent.history``), oldest first; None: no history."""
 
 
 class Selector(Protocol):

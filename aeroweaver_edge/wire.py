@@ -79,6 +79,21 @@ Causes = Annotated[dict[Cause, int], msgspec.Meta(max_length=MAX_CAUSES)]
 """Counts by a fixed cause name (e.g. payloads a receiver refused): small and bounded."""
 
 
+class DecisionDetail(msgspec.Struct, frozen=True, kw_only=True):
+    """Why a UAV chose what it chose (for traces, the console and benchmarks): its labelled
+    options, the selector's base scores, the experience advantages and the pick."""
+
+    options: list[str]  # "A. cover_landmark(target_id=L0)", in label order
+    base: dict[str, float] = {}  # label -> base score (log-prob) of the labels that came back
+    advantage: dict[str, float] = {}  # label -> experience advantage (beta not applied)
+    chosen: str | None = None  # the label picked (None: held without a pick)
+    reason: str = ""  # scoring.choose's reason (e.g. corrected, bound kept base, no label)
+    corrected: bool = False
+    beta: float = 0.0
+    text_label: str | None = None  # the label the model generated, if any
+    omitted_bound: float | None = None  # log-prob bound on labels that did not come back
+
+
 class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     """Per-round progress, (``phase="ready"``) the ack that a UAV holds its assignment, or
     (``phase="final"``) the daemon's last counters as it stops."""
@@ -107,6 +122,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     corrected: bool = False  # the experience correction changed the pick
     llm_calls: int = 0  # requests sent to the LLM endpoint this round (answered or not)
     llm_class: str = ""  # the selector's current logprob class (probe kind), if any
+    prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
+    decision: DecisionDetail | None = None  # options, scores, advantages, pick (round phase)
     rejected: Causes = {}  # cumulative: everything this daemon refused, by cause
     missing_messages: int = 0  # cumulative: expected messages that never came
 

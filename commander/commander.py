@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from aeroweaver_edge.lifecycle import cancel_all
@@ -35,6 +36,9 @@ class Commander:
         self._tasks: list[asyncio.Task[None]] = []
         self._queryables: set[str] = set()
         self.report_event = asyncio.Event()
+        # Read-only listeners of every accepted report (traces, the console): called on the
+        # loop, after the board took the report; they must not block.
+        self.report_listeners: list[Callable[[ProgressReport], None]] = []
 
     async def start(self) -> None:
         # Declare everything before the liveliness token: a peer that sees the token may
@@ -52,7 +56,9 @@ class Commander:
             if key != self.keys.report(rep.uav):
                 self.board.foreign += 1  # a UAV reports only on its own key
                 continue
-            self.board.add(rep)
+            if self.board.add(rep):
+                for listener in self.report_listeners:
+                    listener(rep)
             self.report_event.set()
 
     async def wait_ready(self, uavs: list[str], timeout_s: float) -> set[str]:

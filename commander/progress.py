@@ -17,6 +17,7 @@ class UavProgress:
     reports: int = 0
     holds: int = 0
     prompt_tokens: int = 0
+    prompt_cached: int = 0  # of prompt_tokens, from the endpoint's prompt cache
     completion_tokens: int = 0
     messages_sent: int = 0
     messages_dropped: int = 0
@@ -40,23 +41,25 @@ class ProgressBoard:
     episode_tokens: dict[int, int] = field(default_factory=dict)  # decision tokens per episode
     max_episodes: int = 4096  # bound: reports cannot grow the board without limit
 
-    def add(self, rep: ProgressReport) -> None:
+    def add(self, rep: ProgressReport) -> bool:
+        """Take a report; False (counted in ``foreign``) if it is not for this mission or
+        its sender is not the reporting UAV."""
         if rep.mission_id != self.mission_id or rep.h.sender != rep.uav:
             self.foreign += 1
-            return
+            return False
         if rep.phase == "ready":
             self.ready[rep.uav] = rep.role
-            return
+            return True
         fresh = rep.phase == "round" and rep.episode not in self.episode_tokens
         if fresh and len(self.episode_tokens) >= self.max_episodes:
             self.foreign += 1  # a flood of made-up episode numbers
-            return
+            return False
         p = self.uavs.setdefault(rep.uav, UavProgress(rep.uav))
         # Counters are cumulative in the daemon: the latest report has them all.
         p.rejected = dict(rep.rejected)
         p.missing_messages = rep.missing_messages
         if rep.phase == "final":
-            return
+            return True
         p.role = rep.role
         p.last = rep
         p.reports += 1
@@ -66,6 +69,7 @@ class ProgressBoard:
         p.deadline_misses += rep.hold_cause == "deadline"
         p.llm_class = rep.llm_class or p.llm_class
         p.prompt_tokens += rep.prompt_tokens
+        p.prompt_cached += rep.prompt_cached
         p.completion_tokens += rep.completion_tokens
         p.messages_sent += rep.messages_sent
         p.messages_dropped += rep.messages_dropped
@@ -74,3 +78,4 @@ class ProgressBoard:
         p.cpu_s.append(rep.cpu_s)
         tokens = rep.prompt_tokens + rep.completion_tokens
         self.episode_tokens[rep.episode] = self.episode_tokens.get(rep.episode, 0) + tokens
+        return True

@@ -75,6 +75,12 @@ def nearest_first_k(obs: Observation, entities: list[Entity], ctx: SkillContext)
     return [e for e in entities if e.id in keep]
 
 
+def metres(x: float) -> float:
+    """A coordinate or speed as a message carries it: 0.1 m (m/s) is finer than any sensor
+    here, and 15-digit floats cost ~18 prompt tokens each on small-vocabulary models."""
+    return round(float(x), 1)
+
+
 def move_and_announce(
     skill: str,
     target_id: str,
@@ -84,8 +90,13 @@ def move_and_announce(
     **extra: Scalar,
 ) -> Intent:
     """Fly to (north, east) at the UAV's fixed altitude and send an ``intent`` message
-    ``{skill, target_id, north, east, **extra}`` to every reachable peer."""
-    body: dict[str, Scalar] = {"skill": skill, "target_id": target_id, "north": north, "east": east}
+    ``{skill, target_id, north, east, **extra}`` to every reachable peer (position to 0.1 m)."""
+    body: dict[str, Scalar] = {
+        "skill": skill,
+        "target_id": target_id,
+        "north": metres(north),
+        "east": metres(east),
+    }
     body.update(extra)
     announce = Outgoing(to="*", kind="intent", body=body)
     return Intent(MoveTo((north, east, -ctx.altitude_m)), messages=(announce,))
@@ -152,9 +163,9 @@ def target_report(skill: str, target: Entity) -> Outgoing:
         body={
             "skill": skill,
             "target_id": target.id,
-            "north": target.pos[0],
-            "east": target.pos[1],
-            "vn": target.vel[0],
-            "ve": target.vel[1],
+            "north": metres(target.pos[0]),
+            "east": metres(target.pos[1]),
+            "vn": metres(target.vel[0]),
+            "ve": metres(target.vel[1]),
         },
     )

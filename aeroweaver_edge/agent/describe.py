@@ -1,6 +1,9 @@
-"""The textual observation: what the LLM reads and what experience retrieval matches on.
+"""The textual observation: what the LLM reads each round and the base of the state text that
+experience retrieval matches on (``agent.state_text``).
 
-Numbers are rounded (metres to 5 m) so that alike states share tokens.
+Numbers are rounded (metres to 5 m) so that alike states share tokens, and the text is
+compact: small models spend one token per digit. In an entity line the id comes right
+before the distance, so the retrieval tokeniser pairs them (``uav1~10``).
 """
 
 from __future__ import annotations
@@ -8,32 +11,36 @@ from __future__ import annotations
 import math
 
 from aeroweaver_edge.observation import Observation, horizontal_distance
-from aeroweaver_edge.wire import Vec3
+from aeroweaver_edge.wire import Entity, Vec3
 
 _COMPASS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW")
 
 
-def _bearing(src: Vec3, dst: Vec3) -> str:
+def bearing(src: Vec3 | tuple[float, float], dst: Vec3 | tuple[float, float]) -> str:
+    """Compass point (8 sectors) from ``src`` to ``dst``, north = +x, east = +y."""
     ang = math.degrees(math.atan2(dst[1] - src[1], dst[0] - src[0])) % 360.0
     return _COMPASS[int((ang + 22.5) // 45) % 8]
 
 
-def _m(x: float) -> int:
+def metres5(x: float) -> int:
+    """Metres rounded to 5 m."""
     return int(5 * round(x / 5))
+
+
+def _entity_line(e: Entity, pos: Vec3) -> str:
+    d = horizontal_distance(pos, e.pos)
+    if e.kind == "uav":  # the id says it is a UAV; the role says what it does
+        what = f"{e.role or 'uav'} {e.id}"
+    else:
+        what = f"{e.kind} ({e.role}) {e.id}" if e.role else f"{e.kind} {e.id}"
+    return f"{what}: {metres5(d)} m {bearing(pos, e.pos)}"
 
 
 def describe(obs: Observation) -> str:
     pos = obs.own.pos
     speed = math.hypot(obs.own.vel[0], obs.own.vel[1])
-    lines = [
-        f"round {obs.round}; position north {_m(pos[0])} m east {_m(pos[1])} m; "
-        f"speed {round(speed)} m/s",
-    ]
-    for e in sorted(obs.entities, key=lambda e: (e.kind, e.id)):
-        d = horizontal_distance(pos, e.pos)
-        role = f" ({e.role})" if e.role else ""
-        # The id comes right before the distance so similar states share "<id>~<metres>".
-        lines.append(f"{e.kind}{role} {e.id}: {_m(d)} m {_bearing(pos, e.pos)}")
+    lines = [f"you: north {metres5(pos[0])} east {metres5(pos[1])}, speed {round(speed)} m/s"]
+    lines += [_entity_line(e, pos) for e in sorted(obs.entities, key=lambda e: (e.kind, e.id))]
     if not obs.entities:
-        lines.append("nothing within sensing range")
+        lines.append("nothing in sensing range")
     return "\n".join(lines)

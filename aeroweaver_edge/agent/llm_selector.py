@@ -87,6 +87,8 @@ class LLMSelector:
 
     def _params(self, *, logprobs: bool = True) -> dict[str, Any]:
         params: dict[str, Any] = {"max_tokens": 1, "temperature": self.cfg.temperature}
+        if self.cfg.slot is not None:  # llama-server: keep this agent's prefix in its own slot
+            params["id_slot"] = self.cfg.slot
         if logprobs and not (self.probe is not None and self.probe.kind == "rejected"):
             params.update(logprobs=True, top_logprobs=self.cfg.top_logprobs)
         return params

@@ -6,6 +6,12 @@ exercised for real. It speaks ``/v1/chat/completions``, ``/v1/models``, ``/token
 ``/health`` (llama-server layout), answers from a seeded scripted ``Policy`` that can be
 switched at run time (``fp.policy = ...``), and records every request.
 
+Prompt caching is modelled like llama-server's: ``n_slots`` cache slots, each remembering
+its last prompt; a request with ``id_slot`` uses that slot (wrapping, like llama.cpp's
+``get_slot_by_id``), otherwise the slot sharing the longest prefix (over 10 % of the
+prompt) or else the least recently used one. The shared prefix counts as cached tokens
+(about 4 characters per token) in ``usage`` and, with ``llama_extras``, in ``timings``.
+
 Usage::
 
     async with FakeProvider(Policy(prefer="C")) as fp:
@@ -117,6 +123,7 @@ class RecordedRequest:
     path: str
     headers: dict[str, str]
     body: Any
+    cached_tokens: int | None = None  # what a chat answer reported as cached
 
 
 @dataclass
@@ -143,14 +150,22 @@ def _error(status: int, message: str, kind: str = "invalid_request_error") -> _A
 class FakeProvider:
     """The server. ``policy`` may be reassigned at any time (also from another thread)."""
 
-    def __init__(self, policy: Policy | None = None, model: str = "fake-model") -> None:
+    def __init__(
+        self, policy: Policy | None = None, model: str = "fake-model", n_slots: int = 1
+    ) -> None:
+        if n_slots < 1:
+            raise ValueError("n_slots must be at least 1")
         self._policy = policy or Policy()
         self.model = model
+        self.n_slots = n_slots
+        self._slot_prompts: dict[int, str] = {}
+        self._slot_used: dict[int, int] = {}  # slot -> chat call that last used it
+        self.slots_served: list[int] = []  # the cache slot of every answered chat request
         self.requests: list[RecordedRequest] = []
         self.chat_calls = 0
         self.connections = 0  # TCP connections accepted (keep-alive reuses one)
         self._errors_served = 0
-        self._last_prompt = ""
+        self._last_cached: int | None = None  # of the chat answer being built
         self._server: asyncio.Server | None = None
         self._conns: set[asyncio.Task[None]] = set()
         self._closing = asyncio.Event()
@@ -276,7 +291,8 @@ class FakeProvider:
         except ValueError:
             body = data.decode("utf-8", "replace")
         path = target.split("?", 1)[0]
-        self.requests.append(RecordedRequest(method, path, headers, body))
+        record = RecordedRequest(method, path, headers, body)
+        self.requests.append(record)
         keep = headers.get("connection", "").lower() != "close"
         policy = self._policy
         if path in ("/v1/chat/completions", "/chat/completions") and method == "POST":
@@ -286,6 +302,7 @@ class FakeProvider:
             if policy.delay_s:
                 await asyncio.sleep(policy.delay_s)
             answer = self._gate(policy, headers, target, body) or self._chat(policy, body)
+            record.cached_tokens = self._last_cached
             await self._send(writer, answer, keep, drip_s=policy.drip_s)
         else:
             await self._send(writer, self._route(method, path, policy, body), keep)
@@ -362,6 +379,7 @@ class FakeProvider:
 
     def _chat(self, policy: Policy, body: Any) -> _Answer:
         self.chat_calls += 1
+        self._last_cached = None
         if not isinstance(body, dict) or not isinstance(body.get("messages"), list):
             return _error(400, "messages: field required")
         if policy.status is not None and (
@@ -427,24 +445,39 @@ class FakeProvider:
             "choices": [
                 {"index": 0, "message": message, "logprobs": logprobs, "finish_reason": finish}
             ],
-            "usage": self._usage(policy, prompt),
+            "usage": self._usage(policy, prompt, body.get("id_slot")),
         }
         if policy.llama_extras:
-            answer["timings"] = {"cache_n": 0, "prompt_n": 1, "prompt_ms": 1.0,
+            cache_n = self._last_cached or 0
+            prompt_n = answer["usage"]["prompt_tokens"] - cache_n
+            answer["timings"] = {"cache_n": cache_n, "prompt_n": prompt_n, "prompt_ms": 1.0,
                                  "prompt_per_second": 1000.0, "predicted_n": 1,
                                  "predicted_ms": 1.0, "predicted_per_second": 1000.0}  # fmt: skip
         return _json(200, answer)
 
-    def _usage(self, policy: Policy, prompt: str) -> dict[str, Any]:
-        """~4 characters per token; the shared prefix with the previous prompt is 'cached'."""
+    def _slot(self, prompt: str, id_slot: object) -> tuple[int, int]:
+        """The cache slot a prompt lands in and the characters it shares with that slot."""
+        if isinstance(id_slot, int) and not isinstance(id_slot, bool) and id_slot >= 0:
+            slot = id_slot % self.n_slots
+            return slot, _common_prefix(prompt, self._slot_prompts.get(slot, ""))
+        best, best_common = None, 0
+        for slot, cached in sorted(self._slot_prompts.items()):
+            common = _common_prefix(prompt, cached)
+            if common > best_common and common > 0.1 * len(prompt):
+                best, best_common = slot, common
+        if best is not None:
+            return best, best_common
+        lru = min(range(self.n_slots), key=lambda s: (self._slot_used.get(s, -1), s))
+        return lru, _common_prefix(prompt, self._slot_prompts.get(lru, ""))
+
+    def _usage(self, policy: Policy, prompt: str, id_slot: object = None) -> dict[str, Any]:
+        """~4 characters per token; the prefix shared with the slot's last prompt is cached."""
         prompt_tokens = max(1, len(prompt) // 4)
-        common = 0
-        for a, b in zip(prompt, self._last_prompt, strict=False):
-            if a != b:
-                break
-            common += 1
-        self._last_prompt = prompt
-        cached = min(prompt_tokens, common // 4)
+        slot, common = self._slot(prompt, id_slot)
+        self._slot_prompts[slot] = prompt
+        self._slot_used[slot] = self.chat_calls
+        self.slots_served.append(slot)
+        cached = self._last_cached = min(prompt_tokens, common // 4)
         usage: dict[str, Any] = {
             "prompt_tokens": prompt_tokens,
             "completion_tokens": 1,
@@ -466,6 +499,15 @@ class FakeProvider:
 
 
 # -------------------------------------------------------------------- the scripted model
+
+
+def _common_prefix(a: str, b: str) -> int:
+    n = 0
+    for x, y in zip(a, b, strict=False):
+        if x != y:
+            break
+        n += 1
+    return n
 
 
 def _prompt_text(messages: list[Any]) -> str:

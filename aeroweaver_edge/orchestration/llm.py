@@ -23,9 +23,12 @@ HONESTY_NOTE: dict[Source, str] = {
 
 
 @contextlib.asynccontextmanager
-async def shared_llm(llm: LLMConfig, *, needed: bool) -> AsyncIterator[tuple[LLMConfig, Source]]:
+async def shared_llm(
+    llm: LLMConfig, *, needed: bool, n_parallel: int = 1
+) -> AsyncIterator[tuple[LLMConfig, Source]]:
     """The endpoint every daemon (and the Commander) uses: ``llm`` when it names a URL, else
-    the embedded server, started here and stopped on exit. ``needed=False``: no LLM at all."""
+    the embedded server, started here and stopped on exit, with ``n_parallel`` cache slots
+    (one per UAV: each agent's prefix stays cached). ``needed=False``: no LLM at all."""
     if not needed:
         yield llm, "scripted"
         return
@@ -34,7 +37,7 @@ async def shared_llm(llm: LLMConfig, *, needed: bool) -> AsyncIterator[tuple[LLM
         return
     from aeroweaver_edge.llm.embedded import EmbeddedServer
 
-    async with EmbeddedServer() as server:
+    async with EmbeddedServer(n_parallel=max(1, n_parallel)) as server:
         yield (
             llm.model_copy(update={"base_url": server.base_url, "model": server.model}),
             "embedded",

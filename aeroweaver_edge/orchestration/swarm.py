@@ -39,11 +39,12 @@ from aeroweaver_edge.orchestration.network import RunNetwork, run_network
 from aeroweaver_edge.orchestration.network import free_port as free_port
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.orchestration.run_health import health_fields, security_fields
+from aeroweaver_edge.orchestration.trace import TraceRecorder
 from aeroweaver_edge.security.identity import COMMANDER, WORLD
 from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
-from aeroweaver_edge.tasks import create
+from aeroweaver_edge.tasks import create, get_spec
 from aeroweaver_edge.tasks.base import TaskDefinition
 from commander.commander import Commander
 from commander.plan import MissionPlan
@@ -71,6 +72,10 @@ class SwarmOptions:
     measure_rss: bool = False  # read every daemon process's peak RSS before it exits
     link: Literal["sim", "mavlink", "mavsdk"] = "sim"  # flight: real MAVLink to emulated autopilots
     personality: str = "px4"  # the emulated autopilots' (with a mavlink/mavsdk link)
+    slots: bool | None = None  # pin UAV i to llama-server slot i; None: embedded server only
+    history_rounds: int = d.HISTORY_ROUNDS  # AgentConfig.history_rounds (0: no history)
+    state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
+    trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
     secure: bool = True  # TLS (mutual) + ACL + signatures with per-run identities
 
 
@@ -106,6 +111,8 @@ class RunSummary:
     tokens_by_agent: dict[str, int] = field(default_factory=dict)
     tokens_by_role: dict[str, int] = field(default_factory=dict)
     decision_latency_s: dict[str, float] = field(default_factory=dict)
+    tokens_per_decision: dict[str, float] = field(default_factory=dict)
+    trace: str | None = None  # path of the per-round trace, when one was written
     decision_cpu_s: dict[str, float] = field(default_factory=dict)
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
@@ -143,6 +150,7 @@ class RunSummary:
             "deadline_misses_by_side": self.deadline_misses_by_side,
             "lost_uavs": self.lost_uavs,
             "tokens": self.tokens,
+            "tokens_per_decision": self.tokens_per_decision,
             "tokens_by_agent": self.tokens_by_agent,
             "tokens_by_role": self.tokens_by_role,
             "decision_latency_s": self.decision_latency_s,
@@ -156,6 +164,7 @@ class RunSummary:
             "run_id": self.run_id,
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
+            "trace": self.trace,
             "security": self.security,
             **({"link": self.link} if self.link else {}),
         }
@@ -177,6 +186,18 @@ def percentiles(xs: Iterable[float]) -> dict[str, float]:
         return round(ys[min(len(ys) - 1, round(q * (len(ys) - 1)))], 4)
 
     return {"p50": at(0.5), "p95": at(0.95), "max": at(1.0)}
+
+
+def _per_decision(prompt: int, cached: int, completion: int, calls: int) -> dict[str, float]:
+    """Mean tokens per LLM request; ``prompt_uncached`` is what the endpoint had to process."""
+    if not calls:
+        return {}
+    return {
+        "prompt": round(prompt / calls, 1),
+        "prompt_cached": round(cached / calls, 1),
+        "prompt_uncached": round((prompt - cached) / calls, 1),
+        "completion": round(completion / calls, 2),
+    }
 
 
 def mesh_configs(namespace: str, *, star: bool = True) -> tuple[MeshConfig, MeshConfig]:
@@ -216,6 +237,27 @@ def _episode_dict(ep: int, res: EpisodeResult, task: TaskDefinition) -> dict[str
     }
 
 
+def _trace_header(summary: RunSummary, opts: SwarmOptions, cfg: SimConfig) -> dict[str, Any]:
+    """What a trace reader needs before the first round: who flies what, and where."""
+    return {
+        "task": summary.task,
+        "seed": summary.seed,
+        "uavs": summary.uavs,
+        "selector": summary.selector,
+        "model": summary.model,
+        "note": summary.note,
+        "run_id": summary.run_id,
+        "roles": summary.roles,
+        "mission": summary.mission,
+        "beta": opts.beta,
+        "round_s": cfg.round_s,
+        "max_rounds": cfg.max_rounds,
+        "arena_half_m": d.ARENA_HALF_M,
+        "sensing_radius_m": cfg.sensing_radius_m,
+        "comm_radius_m": d.COMM_RADIUS_M,
+    }
+
+
 def world_task(plan: MissionPlan, max_rounds: int) -> TaskDefinition:
     """The task definition the world flies for ``plan``: its task, its UAVs and roles."""
     roles = {u: plan.assignments[u].role for u in sorted(plan.assignments, key=natural)}
@@ -233,8 +275,11 @@ async def run_swarm(
 ) -> RunSummary:
     started = time.monotonic()
     async with contextlib.AsyncExitStack() as stack:
+        # One embedded-server cache slot per UAV we expect to fly (the plan is not made yet:
+        # it may need the LLM); a larger mission shares slots round-robin.
+        n_slots = opts.uavs or get_spec(opts.task or "coverage").team_size
         llm, source = await stack.enter_async_context(
-            shared_llm(opts.llm, needed=opts.selector == "llm")
+            shared_llm(opts.llm, needed=opts.selector == "llm", n_parallel=n_slots)
         )
         if plan_factory is not None:
             plan = await plan_factory(uav_ids(opts.uavs or 3))
@@ -296,7 +341,13 @@ async def run_swarm(
 
         board_ref: dict[str, ProgressBoard] = {}
 
+        recorder = None
+        if opts.trace_path is not None:
+            recorder = TraceRecorder(opts.trace_path, _trace_header(summary, opts, sim_cfg))
+
         async def round_hook(log: RoundLog) -> None:
+            if recorder is not None:
+                recorder.on_round(log)
             summary.round_wall_s.append(log.wall_s)
             summary.deliveries += log.deliveries
             if fault is not None:
@@ -318,17 +369,21 @@ async def run_swarm(
         await runner.start()
         stack.push_async_callback(runner.aclose)
         commander = Commander(cmdr_mesh, opts.swarm, cmdr_headers)
+        if recorder is not None:
+            commander.report_listeners.append(recorder.on_report)
         await commander.start()
         stack.push_async_callback(commander.aclose)
         if on_commander is not None:
             on_commander(commander)
 
+        pin_slots = source == "embedded" if opts.slots is None else opts.slots
+        pin_slots = pin_slots and source != "scripted"
         configs = [
             UavConfig(
                 uav=u,
                 swarm=opts.swarm,
                 mesh=net.config(u),
-                llm=llm,
+                llm=llm.model_copy(update={"slot": i % n_slots}) if pin_slots else llm,
                 agent=AgentConfig(
                     selector=opts.selector,
                     beta=opts.beta,
@@ -336,10 +391,12 @@ async def run_swarm(
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
                     run_id=summary.run_id,
                     share_experience=opts.share_experience,
+                    history_rounds=opts.history_rounds,
+                    state_context=opts.state_context,
                 ),
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
-            for u in uavs
+            for i, u in enumerate(uavs)
         ]
         daemons = DaemonSet(configs, opts.processes, tmp)
         stack.push_async_callback(daemons.stop)
@@ -360,6 +417,8 @@ async def run_swarm(
             for ep in range(opts.episodes):
                 result = await runner.run_episode(ep)
                 summary.episodes.append(_episode_dict(ep, result, task))
+                if recorder is not None:
+                    recorder.on_episode(ep, result)
                 if ep + 1 < opts.episodes:
                     # Let finalised experience reach same-role peers before the next episode.
                     await asyncio.sleep(0.3)
@@ -403,8 +462,15 @@ async def run_swarm(
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
-        summary.tokens = {"prompt": prompt, "completion": completion, "total": prompt + completion}
+        cached = sum(p.prompt_cached for p in board.uavs.values())
+        summary.tokens = {
+            "prompt": prompt,
+            "prompt_cached": cached,
+            "completion": completion,
+            "total": prompt + completion,
+        }
         summary.llm_calls = health["llm_calls"]
+        summary.tokens_per_decision = _per_decision(prompt, cached, completion, summary.llm_calls)
         for e in summary.episodes:
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
         summary.tokens_by_agent = {
@@ -420,6 +486,8 @@ async def run_swarm(
         )
         summary.decision_cpu_s = percentiles([x for p in board.uavs.values() for x in p.cpu_s])
         summary.security = security_fields(world_mesh, cmdr_mesh, runner, board)
+        if recorder is not None:
+            summary.trace = str(recorder.write())
     summary.wall_s = time.monotonic() - started
     return summary
 

@@ -141,9 +141,15 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
     if s.get("model"):
         console.print(
             f"model {s['model']}; probe: {escape(str(s['probe']))}; LLM calls {s['llm_calls']}; "
-            f"tokens {tok.get('total', 0)} (prompt {tok.get('prompt', 0)}, "
-            f"completion {tok.get('completion', 0)})"
+            f"tokens {tok.get('total', 0)} (prompt {tok.get('prompt', 0)} of which cached "
+            f"{tok.get('prompt_cached', 0)}, completion {tok.get('completion', 0)})"
         )
+        per = s.get("tokens_per_decision") or {}
+        if per:
+            console.print(
+                f"per decision: prompt {per['prompt']:.0f} tokens, uncached "
+                f"{per['prompt_uncached']:.0f}, cached {per['prompt_cached']:.0f}"
+            )
     if summary.get("lost_uavs"):
         lost = ", ".join(
             f"{u} (episode {w[0]}, round {w[1] + 1})" for u, w in summary["lost_uavs"].items()

@@ -37,6 +37,7 @@ from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
 from aeroweaver_edge.tasks.base import TaskDefinition
 from aeroweaver_edge.wire import (
     BROADCAST,
+    Entity,
     HeaderFactory,
     InboxMessage,
     Keys,
@@ -68,6 +69,10 @@ class RoundLog:
     wait_s: float
     deliveries: int = 0  # (message, recipient) pairs that reach, of this round's messages
     wall_s: float = 0.0  # the whole round in the world: perceptions to rewards
+    # The world after the round (for traces and observers): every body, ours and the
+    # world's opponents (kind "uav", with role), then the static entities.
+    bodies: tuple[Entity, ...] = ()
+    entities: tuple[Entity, ...] = ()
     refused: dict[str, int] = field(default_factory=dict)  # world-side refusals this round
 
 
@@ -320,6 +325,8 @@ class WorldRunner:
                         wait_s=waited,
                         deliveries=sum(len(v) for v in expect.values()),
                         wall_s=time.monotonic() - round_started,
+                        bodies=tuple(b.as_entity() for b in world.bodies()),
+                        entities=tuple(world.entities()),
                         refused=dict(self.refusals() - refused_before),
                     )
                 )

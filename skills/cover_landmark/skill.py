@@ -6,7 +6,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Intent, MoveTo, Outgoing
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import nearest_first_k
+from skills._common import metres, nearest_first_k
 
 NAME = "cover_landmark"
 
@@ -29,6 +29,11 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     announce = Outgoing(
         to="*",
         kind="intent",
-        body={"skill": NAME, "target_id": landmark.id, "north": north, "east": east},
+        body={
+            "skill": NAME,
+            "target_id": landmark.id,
+            "north": metres(north),
+            "east": metres(east),
+        },
     )
     return Intent(MoveTo((north, east, -ctx.altitude_m)), messages=(announce,))

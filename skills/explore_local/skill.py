@@ -11,6 +11,7 @@ import math
 
 from aeroweaver_edge.actions import Intent, MoveTo, Outgoing
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from skills._common import Scalar, metres
 
 NAME = "explore_local"
 RADIUS_M = 35.0
@@ -35,5 +36,6 @@ def waypoint(round_: int, uav_index: int, ctx: SkillContext) -> tuple[float, flo
 
 def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     north, east = waypoint(obs.round, ctx.uav_index, ctx)
-    announce = Outgoing(to="*", kind="intent", body={"skill": NAME, "north": north, "east": east})
+    body: dict[str, Scalar] = {"skill": NAME, "north": metres(north), "east": metres(east)}
+    announce = Outgoing(to="*", kind="intent", body=body)
     return Intent(MoveTo((north, east, -ctx.altitude_m)), messages=(announce,))

@@ -10,7 +10,7 @@ from pydantic import Field
 
 from aeroweaver_edge.actions import HOLD, Hold, Intent, Outgoing
 from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
-from skills._common import Scalar, allowed, usable_id, visible
+from skills._common import Scalar, allowed, metres, usable_id, visible
 
 NAME = "signal_goal"
 ROLES = frozenset({"speaker"})
@@ -32,5 +32,5 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     body: dict[str, Scalar] = {"skill": NAME, "target_id": params.target_id}
     landmark = visible(obs, params.target_id, "landmark")
     if landmark is not None:
-        body["north"], body["east"] = landmark.pos[0], landmark.pos[1]
+        body["north"], body["east"] = metres(landmark.pos[0]), metres(landmark.pos[1])
     return Intent(Hold(), messages=(Outgoing(to="*", kind="goal", body=body),))

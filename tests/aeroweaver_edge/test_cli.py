@@ -87,8 +87,11 @@ def test_subcommand_help(capsys: pytest.CaptureFixture[str], command: str, flag:
 
 @pytest.mark.parametrize(
     "argv",
-    [[], ["daemon"], ["sim", "--selector", "oracle"], ["fly"], ["sim", "--uavs", "three"]],
-)
+    [
+        [], ["daemon"], ["sim", "--selector", "oracle"], ["fly"], ["sim", "--uavs", "three"],
+        ["sim", "--history", "-1"], ["sim", "--history", "x"], ["sim", "--state-text", "all"],
+    ],
+)  # fmt: skip
 def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
     with pytest.raises(SystemExit) as info:
         main(argv)
@@ -103,6 +106,22 @@ def test_sim_defaults_match_the_paper_horizon() -> None:
     args = build_parser().parse_args(["sim"])
     # No task: coverage, unless a --mission names another (the plan decides).
     assert (args.task, args.uavs, args.rounds, args.selector) == (None, None, 24, "llm")
+
+
+def test_sim_method_switches_default_to_the_paper_and_reach_the_options() -> None:
+    args = build_parser().parse_args(["sim"])
+    assert (args.history, args.state_text, args.llm_slots) == (8, "full", False)
+    args = build_parser().parse_args(["sim", "--history", "0", "--state-text", "observation"])
+    assert (args.history, args.state_text) == (0, "observation")
+
+
+def test_bench_llm_latency_refuses_a_bad_shape_in_one_line(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["bench", "llm_latency", "--uavs", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "--uavs and --rounds must be >= 1" in err
 
 
 @pytest.mark.parametrize("task", TASK_NAMES)

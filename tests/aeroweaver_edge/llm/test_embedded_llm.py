@@ -11,6 +11,7 @@ import importlib.util
 import math
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -117,3 +118,28 @@ async def test_embedded_smoke_structure_only() -> None:
     assert choose(scores, list(PROBE_LABELS), {}, beta=0.8).label in PROBE_LABELS
     assert client.ledger.total.calls == 2
     assert time.perf_counter() - started < 15.0
+
+
+@pytest.mark.embedded
+async def test_embedded_slot_keeps_an_agents_prefix_for_its_next_decision() -> None:
+    reason = _model_missing()
+    if reason is not None:
+        pytest.skip(reason)
+    first_req = replace(_small_request(), history=())
+    obs = replace(first_req.observation, round=2)
+    second_req = replace(first_req, observation=obs, history=("r1 hold_position() -1.00",))
+    async with EmbeddedServer(n_parallel=2) as server:
+        assert server.n_ctx == 4096  # two slots of SLOT_CTX
+        cfg = LLMConfig(base_url=server.base_url, model=server.model, deadline_s=30.0, slot=1)
+        selector = LLMSelector(ChatClient.from_config(cfg), cfg)
+        try:
+            first = await selector.score(first_req)
+            second = await selector.score(second_req)
+        finally:
+            await selector.aclose()
+    assert first.error is None
+    assert second.error is None
+    assert first.cached_tokens == 0  # a fresh slot
+    # The second decision reuses the system prompt and the agent part from slot 1.
+    assert 0 < second.cached_tokens < second.prompt_tokens
+    assert second.cached_tokens > second.prompt_tokens // 2

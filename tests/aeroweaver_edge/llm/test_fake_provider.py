@@ -161,3 +161,39 @@ def test_runs_in_a_thread_for_sync_code() -> None:
         assert r.json()["choices"][0]["message"]["content"] == "C"
     with pytest.raises(httpx.ConnectError):
         httpx.get(f"{fp.root_url}/health", timeout=1)
+
+
+def _chat(prefix: str, tail: str, slot: int | None = None) -> dict[str, object]:
+    body: dict[str, object] = {**CHAT, "messages": [{"role": "user", "content": prefix + tail}]}
+    if slot is not None:
+        body["id_slot"] = slot
+    return body
+
+
+async def test_cache_slots_like_llama_server() -> None:
+    a, b = "A" * 400, "B" * 400  # two agents' prefixes, nothing in common
+    hit = (len("[user]\n") + 400) // 4  # the fake renders "[role]\n" headers, 4 chars a token
+    policy = Policy(usage="llama", llama_extras=True)
+    async with FakeProvider(policy, n_slots=2) as fp, httpx.AsyncClient() as http:
+
+        async def cached(body: dict[str, object]) -> tuple[int, int]:
+            answer = (await http.post(f"{fp.base_url}/chat/completions", json=body)).json()
+            usage, timings = answer["usage"], answer["timings"]
+            assert timings["cache_n"] + timings["prompt_n"] == usage["prompt_tokens"]
+            return usage["prompt_tokens_details"]["cached_tokens"], timings["cache_n"]
+
+        # Pinned: each agent finds its own prefix in its slot, whatever came in between.
+        assert await cached(_chat(a, "1", slot=0)) == (0, 0)
+        assert await cached(_chat(b, "1", slot=1)) == (0, 0)
+        assert (await cached(_chat(a, "2", slot=0)))[0] == hit
+        assert (await cached(_chat(b, "2", slot=3)))[0] == hit  # slot ids wrap, as in llama.cpp
+        # Unpinned: the most similar slot, else the least recently used one.
+        assert (await cached(_chat(a, "3")))[0] == hit
+        assert (await cached(_chat("C" * 400, "1")))[0] == len("[user]\n") // 4
+        assert fp.slots_served == [0, 1, 0, 1, 0, 1]  # "C" evicted b's slot (LRU)
+        assert fp.chat_bodies()[3]["id_slot"] == 3  # every request is recorded as sent
+
+
+def test_slot_count_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="n_slots"):
+        FakeProvider(n_slots=0)

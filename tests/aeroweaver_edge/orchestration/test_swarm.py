@@ -72,7 +72,8 @@ async def test_in_process_coverage_episode_completes() -> None:
     # Every UAV answered every round in time: nobody was missing or absent.
     assert all(set(log.commands) == set(UAVS) and not log.missed and not log.absent for log in logs)
     assert data["deadline_misses"] == 0
-    assert data["tokens"] == {"prompt": 0, "completion": 0, "total": 0}
+    assert data["tokens"] == {"prompt": 0, "prompt_cached": 0, "completion": 0, "total": 0}
+    assert data["tokens_per_decision"] == {}  # no LLM decisions
 
 
 async def test_same_seed_gives_the_same_returns_in_processes_mode() -> None:

@@ -19,7 +19,7 @@ from aeroweaver_edge.tasks import TASK_NAMES, get_spec
 PINNED: dict[str, tuple[float, int, str]] = {
     "coverage": (-24.04271252211335, 24, "horizon"),
     "pursuit_evasion": (90.0, 24, "complete"),
-    "guided_navigation": (-3.3267287956580245, 14, "complete"),
+    "guided_navigation": (-3.32672923737776, 14, "complete"),
     "private_communication": (4.0, 3, "complete"),
     "circular_formation": (-8.455572936827354, 18, "complete"),
     "line_formation": (-7.449791114886901, 15, "complete"),

@@ -1,0 +1,95 @@
+"""The agent's own interaction history (paper §3.2: each local agent's context holds "an
+isolated interaction history").
+
+Every decision this UAV took in the current episode becomes one line of its context, e.g.
+``r4 explore_local() -1.23`` (round, action, reward). Two rules keep the prompt cache-friendly:
+
+* **Frozen lines.** A line is written the first time it is shown (the round after the
+  decision, when lockstep has delivered its reward) and never changes afterwards, so from
+  round to round the history only grows at its end and the server reuses every token before.
+* **Block window.** Showing the last ``block`` lines would shift the text every round (a
+  cache miss every round). Instead the shown lines start at a block boundary: between
+  ``block`` and ``2 * block - 1`` of the most recent lines are visible, and the text changes
+  other than by appending once every ``block`` rounds (one miss then).
+
+The history is per UAV and per episode (a new episode starts empty): nothing here is shared
+with peers, which is what "isolated" means in the paper.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+MAX_INVOCATION = 80  # characters of an invocation shown in a line
+
+
+@dataclass(frozen=True)
+class _Decision:
+    round: int
+    invocation: str
+    chosen: bool  # False: a fallback hold (error, timeout, no usable label)
+
+
+def _reward_text(reward: float) -> str:
+    value = round(reward, 2)
+    return "0.00" if value == 0 else f"{value:.2f}"  # never "-0.00"
+
+
+def history_line(round_: int, invocation: str, chosen: bool, reward: float | None) -> str:
+    """One frozen history line (compact: digits are one token each for small models)."""
+    text = f"r{round_} {invocation[:MAX_INVOCATION]}"
+    if not chosen:
+        text += " [no choice]"
+    if reward is not None:
+        text += f" {_reward_text(reward)}"
+    return text
+
+
+class InteractionHistory:
+    """Recent decisions and rewards of one UAV, rendered append-only in blocks."""
+
+    def __init__(self, block: int) -> None:
+        if block < 1:
+            raise ValueError("history block must be at least 1 round")
+        self.block = block
+        self._episode: int | None = None
+        self._pending: list[_Decision] = []
+        self._rewards: dict[int, float] = {}
+        self._lines: list[str] = []
+        self._dropped = 0  # lines before _lines[0] that can never be shown again
+
+    def _enter(self, episode: int) -> None:
+        if episode != self._episode:
+            self._episode = episode
+            self._pending.clear()
+            self._rewards.clear()
+            self._lines.clear()
+            self._dropped = 0
+
+    def record_decision(self, episode: int, round_: int, invocation: str, chosen: bool) -> None:
+        self._enter(episode)
+        self._pending.append(_Decision(round_, invocation, chosen))
+
+    def record_reward(self, episode: int, round_: int, reward: float) -> None:
+        """A reward of this episode; one for another episode is ignored (it cannot be shown)."""
+        if episode == self._episode:
+            self._rewards[round_] = reward
+
+    def lines(self, episode: int, round_: int) -> tuple[str, ...]:
+        """The history to show in round ``round_``: decisions of earlier rounds only."""
+        self._enter(episode)
+        due = sorted((d for d in self._pending if d.round < round_), key=lambda d: d.round)
+        if due:
+            self._pending = [d for d in self._pending if d.round >= round_]
+            for d in due:
+                self._lines.append(
+                    history_line(d.round, d.invocation, d.chosen, self._rewards.get(d.round))
+                )
+        # A reward of an earlier round can no longer change a frozen line: forget it.
+        self._rewards = {r: v for r, v in self._rewards.items() if r >= round_}
+        total = self._dropped + len(self._lines)
+        start = (total // self.block - 1) * self.block if total >= self.block else 0
+        if start > self._dropped:  # the window moved on: forget what it left behind
+            del self._lines[: start - self._dropped]
+            self._dropped = start
+        return tuple(self._lines)
