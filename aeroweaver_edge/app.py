@@ -2,10 +2,15 @@
 
 Used both by ``aeroweaver daemon --config`` (one process per UAV) and by the simulated
 swarm (several daemons in one event loop, each with its own Zenoh session).
+
+With ``[mesh.security]`` the header epoch is the identity's persisted boot counter (so a
+restart is recognised without the wall clock, and a forged leap is bounded) and the peer
+link admits only the swarm's UAV identities, with beacons held to the safety envelope.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator, Awaitable, Callable
@@ -16,6 +21,7 @@ from aeroweaver_edge.daemon import DaemonPorts, DaemonStats, UavDaemon
 from aeroweaver_edge.decision_round import RoundOutcome
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.ports import Selector
+from aeroweaver_edge.security.wiring import boot_headers, peer_limits
 from aeroweaver_edge.skills import SkillRegistry, load_skills
 from aeroweaver_edge.wire import HeaderFactory, Keys
 
@@ -83,10 +89,11 @@ async def run_daemon(
 ) -> DaemonStats:
     """Run one daemon until its clock ends the run. Every resource is closed on the way out."""
     registry = registry or load_skills()
-    headers = HeaderFactory(cfg.uav)
     async with contextlib.AsyncExitStack() as stack:
         mesh = await Mesh.open(cfg.mesh, node_id=cfg.uav)
         stack.push_async_callback(mesh.aclose)
+        headers = await asyncio.to_thread(boot_headers, cfg.mesh, cfg.uav)
+        identities = mesh.security.identities if mesh.security is not None else None
         ports, start, stop = _ports(cfg, mesh, headers)
         await start()
         stack.push_async_callback(stop)
@@ -111,6 +118,7 @@ async def run_daemon(
             altitude_m=cfg.vehicle.altitude_m,
             round_s=cfg.round_s,
             on_round=on_round,
+            peer_limits=peer_limits(identities, cfg.safety, cfg.round_s),
         )
         attach = getattr(ports.perception, "attach", None)
         if attach is not None:  # field perception: peers come from the daemon's beacons

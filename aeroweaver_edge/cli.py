@@ -32,7 +32,14 @@ from aeroweaver_edge.cli_checks import (
     int_in,
 )
 from aeroweaver_edge.cli_errors import ArgumentParser, report
-from aeroweaver_edge.config import MAX_UAVS, LLMConfig, UavConfig, load_config, parse_config
+from aeroweaver_edge.config import (
+    MAX_UAVS,
+    LLMConfig,
+    MeshConfig,
+    UavConfig,
+    load_config,
+    parse_config,
+)
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.tasks import TASK_NAMES
 
@@ -132,6 +139,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         state_context=args.state_text == "full",
         trace_path=Path(args.trace) if args.trace else None,
         slots=True if args.llm_slots else None,
+        secure=not args.insecure,
     )
     view = None if args.quiet else LiveView()
     try:
@@ -191,18 +199,21 @@ def cmd_daemon(args: argparse.Namespace) -> int:
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
-    from aeroweaver_edge.config import MeshConfig
     from aeroweaver_edge.mesh import build_zenoh_config
     from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
     from aeroweaver_edge.orchestration.view import LiveView, print_mission
 
-    mesh = parse_config(
-        {"listen": args.listen or ["tcp/127.0.0.1:0"], "connect": args.connect or [],
-         "namespace": args.namespace},
-        MeshConfig,
-        "mesh flags",
-    )  # fmt: skip
-    build_zenoh_config(mesh)  # a bad endpoint or namespace is an error now, not mid-run
+    world_mesh = None
+    if args.keys:
+        mesh, world_mesh = _secured_mission_meshes(args)
+    else:
+        mesh = parse_config(
+            {"listen": args.listen or ["tcp/127.0.0.1:0"], "connect": args.connect or [],
+             "namespace": args.namespace},
+            MeshConfig,
+            "mesh flags",
+        )  # fmt: skip
+    build_zenoh_config(mesh)  # a bad endpoint, namespace or key file is an error now
     if args.json:
         check_output_file(Path(args.json), "--json")
     llm = None if args.no_llm else _llm_from_args(args)
@@ -210,7 +221,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
         text=args.text, swarm=args.swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
         top_k=args.top_k,
         sim_world=args.sim_world, seed=args.seed, episodes=args.episodes,
-        max_rounds=args.rounds,
+        max_rounds=args.rounds, world_mesh=world_mesh if args.sim_world else None,
     )  # fmt: skip
 
     async def go() -> dict[str, Any]:
@@ -237,6 +248,44 @@ def cmd_mission(args: argparse.Namespace) -> int:
         write_json_file(Path(args.json), out)
         print(f"mission record written to {args.json}")
     return 0
+
+
+def _secured_mission_meshes(args: argparse.Namespace) -> tuple[MeshConfig, MeshConfig | None]:
+    """``mission start --keys DIR``: the Commander's (and the world's) secured ``[mesh]``
+    from a swarm directory made by ``aeroweaver keys init``."""
+    from aeroweaver_edge.config import ConfigError
+    from aeroweaver_edge.security import render
+    from aeroweaver_edge.security.identity import COMMANDER, WORLD, SwarmPki
+    from aeroweaver_edge.security.pki import PkiError
+
+    try:
+        pki = SwarmPki.load(Path(args.keys))
+    except (PkiError, OSError) as exc:
+        raise ConfigError(f"--keys {args.keys}: {exc}") from None
+    if pki.swarm != args.swarm:
+        raise ConfigError(
+            f"--keys {args.keys} is for swarm {pki.swarm!r}, not {args.swarm!r}",
+            f"pass --swarm {pki.swarm}",
+        )
+    out: list[MeshConfig | None] = []
+    for name in (COMMANDER, WORLD):
+        if name not in pki.identities.members:
+            out.append(None)
+            continue
+        try:
+            cfg = render.mesh_config(
+                pki, name, listen=args.listen or ["tls/127.0.0.1:0"], connect=args.connect or [],
+                namespace=args.namespace,
+            )  # fmt: skip
+        except (PkiError, ValueError) as exc:
+            raise ConfigError(f"--keys {args.keys}: {exc}") from None
+        out.append(cfg)
+    cmdr, world = out
+    if cmdr is None:
+        raise ConfigError(f"--keys {args.keys}: no {COMMANDER!r} identity in that swarm")
+    if args.sim_world and world is None:
+        raise ConfigError(f"--keys {args.keys}: --sim-world needs the {WORLD!r} identity")
+    return cmdr, world
 
 
 def cmd_probe(args: argparse.Namespace) -> int:
@@ -317,7 +366,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.what == "scale":
         from aeroweaver_edge.bench import scale
 
-        argv = ["--sizes", *map(str, args.sizes), "--rounds", str(args.rounds)]
+        argv = ["--sizes", *map(str, args.sizes or [3, 10, 25, 50]), "--rounds", str(args.rounds)]
         argv += ["--seed", str(args.seed), "--task", args.task]
         if args.in_process:
             argv.append("--in-process")
@@ -326,6 +375,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import mavlink
 
         return mavlink.main(["--seconds", str(args.seconds)])
+    if args.what == "security":  # TLS / ACL / signature overhead, per message and per round
+        from aeroweaver_edge.bench import security
+
+        argv = ["--runs", *map(str, args.sizes or [3, 10]), "--rounds", str(args.rounds)]
+        return security.main([*argv, "--seed", str(args.seed), "--task", args.task])
+    if args.what == "fuzz":  # hostile payloads over every key
+        from aeroweaver_edge.bench import fuzz_wire
+
+        argv = ["--cases", str(args.cases), "--seed", str(args.seed)]
+        return fuzz_wire.main([*argv, *(["--insecure"] if args.insecure else [])])
     if args.what == "llm_latency":
         from aeroweaver_edge.bench import llm_latency
 
@@ -441,6 +500,11 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     s.add_argument("--personality", choices=["px4", "ardupilot"], default="px4",
                    help="emulated autopilot type (with --link mavlink)")  # fmt: skip
+    s.add_argument(
+        "--insecure", action="store_true",
+        help="plain loopback TCP: no TLS, ACL or signatures (default: a throw-away PKI per run, "
+        "every session mutually authenticated, ACL-checked and signed)",
+    )  # fmt: skip
     _add_llm_flags(s)
     s.set_defaults(func=cmd_sim)
 
@@ -463,6 +527,11 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument("--connect", action="append", help="zenoh endpoint of a daemon or router")
     ms.add_argument("--listen", action="append", help="zenoh endpoint to listen on")
     ms.add_argument("--namespace", help="zenoh namespace of the swarm")
+    ms.add_argument(
+        "--keys", metavar="DIR",
+        help="secured swarm: the directory from `aeroweaver keys init` (runs as cmdr; the "
+        "sim world as world); endpoints are then tls/",
+    )  # fmt: skip
     ms.add_argument("--roster-wait", type=finite(), default=3.0, help="seconds to discover daemons")
     ms.add_argument("--sim-world", action="store_true", help="also run the kinematic world")
     ms.add_argument("--seed", type=int, default=1)
@@ -500,7 +569,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument(
-        "what", choices=["memory", "memory-kill", "scale", "reference", "mavlink", "llm_latency"]
+        "what",
+        choices=[
+            "memory",
+            "memory-kill",
+            "scale",
+            "reference",
+            "mavlink",
+            "llm_latency",
+            "security",
+            "fuzz",
+        ],
     )
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
     b.add_argument("--kills", type=int_in(1), default=200, help="memory-kill: SIGKILLs")
@@ -508,15 +587,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--sizes",
         type=int_in(1, MAX_UAVS),
         nargs="+",
-        default=[3, 10, 25, 50],
-        help="scale: swarm sizes",
+        default=None,
+        help="scale, security: swarm sizes (default 3 10 25 50; security: 3 10)",
     )
-    b.add_argument("--task", choices=TASK_NAMES, default="coverage", help="scale: task")
+    b.add_argument("--task", choices=TASK_NAMES, default="coverage", help="scale, security: task")
     b.add_argument(
         "--rounds",
         type=int_in(1),
         default=defaults.MAX_ROUNDS,
-        help="scale, llm_latency: rounds per run",
+        help="scale, llm_latency, security: rounds per run",
     )
     b.add_argument("--seed", type=int, default=1, help="scale: layout seed")
     b.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="reference: seeds")
@@ -526,6 +605,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--seconds", type=finite(), default=5.0, help="mavlink: streaming time")
     b.add_argument("--uavs", type=int, default=3, help="llm_latency: UAVs sharing the server")
+    b.add_argument("--cases", type=int_in(1), default=100_000, help="fuzz: payloads")
+    b.add_argument("--insecure", action="store_true", help="fuzz: no signature layer")
     b.set_defaults(func=cmd_bench)
 
     # flight: emulated autopilots and signing keys (docs/flight.md)

@@ -4,13 +4,21 @@ It talks only to ports (Vehicle, Clock, Perception, RewardSource, PeerChannel, S
 which backend serves each port is chosen by the caller from config. One round is in
 ``decision_round``. The Commander's context and assignment arrive over the mesh; when the
 assignment changes, the peer channel gets the new role and the task's message routing.
+
+The Commander's authority is its live session (``MissionState(track_commander=True)``):
+the daemon watches its liveliness token, drops the mission (and holds) when it goes, and
+asks for the context and its assignment whenever it (re)appears, then again with backoff
+until it has both, so a daemon whose link formed after the Commander published (or whose
+first query raced the Commander's plan) still gets its assignment.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
+from collections import Counter
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -21,8 +29,9 @@ from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
 from aeroweaver_edge.flight_phases import ApprovalPredicate, FlightPhases, default_approval
 from aeroweaver_edge.hold_reasons import count_causes
-from aeroweaver_edge.inbox import within
+from aeroweaver_edge.inbox import RADIO_DROPS, PeerLimits, within
 from aeroweaver_edge.lifecycle import cancel_all
+from aeroweaver_edge.mesh import MeshError
 from aeroweaver_edge.mission_state import MissionState
 from aeroweaver_edge.observation import MissionView
 from aeroweaver_edge.ports import (
@@ -36,6 +45,7 @@ from aeroweaver_edge.ports import (
 )
 from aeroweaver_edge.safety_gate import SafetyGate
 from aeroweaver_edge.wire import (
+    MAX_CAUSES,
     Assignment,
     DecisionDetail,
     ExperienceRecord,
@@ -48,11 +58,13 @@ from aeroweaver_edge.wire import (
 
 if TYPE_CHECKING:
     from aeroweaver_edge.agent.memory import AsyncExperienceMemory
-    from aeroweaver_edge.mesh import Mesh, Subscription
+    from aeroweaver_edge.mesh import LivelinessWatch, Mesh, Subscription
     from aeroweaver_edge.skills import SkillRegistry
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
+
+CATCH_UP_RETRY_S = (0.25, 4.0)  # first and longest wait between catch-up queries
 
 
 def _llm_requests(selector: Selector) -> int:
@@ -119,6 +131,7 @@ class UavDaemon:
         round_s: float = ROUND_S,
         on_round: Callable[[RoundOutcome], Awaitable[None]] | None = None,
         approve: ApprovalPredicate = default_approval,
+        peer_limits: PeerLimits | None = None,
     ) -> None:
         self.cfg = cfg
         self.uav = cfg.uav
@@ -127,7 +140,8 @@ class UavDaemon:
         self.ports = ports
         self.headers = headers
         self.memory = memory
-        self.mission = MissionState(cfg.uav)
+        self.mission = MissionState(cfg.uav, track_commander=True)
+        self._need_catch_up = asyncio.Event()
         self.stats = DaemonStats()
         self._peer_link = None
         if ports.peers is None:
@@ -137,8 +151,9 @@ class UavDaemon:
             # simulation the world tells each UAV what it senses, so beacons are not followed.
             field = cfg.vehicle.backend != "sim" and not cfg.vehicle.sim_world
             self._peer_link = PeerLink(
-                mesh, self.keys, cfg.uav, headers, cfg.mesh.comm_radius_m, track_neighbours=field
-            )
+                mesh, self.keys, cfg.uav, headers, cfg.mesh.comm_radius_m,
+                track_neighbours=field, limits=peer_limits,
+            )  # fmt: skip
         self.link: PeerChannel = ports.peers or self._peer_link  # type: ignore[assignment]
         self._routed: tuple[str, str] | None = None
         self._on_round = on_round
@@ -181,17 +196,71 @@ class UavDaemon:
 
     async def _pump_context(self, sub: Subscription[MissionContext]) -> None:
         async for _key, msg in sub:
-            self._changed(self.mission.update_context, msg)
+            self._changed(self._take_context, msg)
 
     async def _pump_assignment(self, sub: Subscription[Assignment]) -> None:
         async for _key, msg in sub:
-            self._changed(self.mission.update_assignment, msg)
+            self._changed(self._take_assignment, msg)
+
+    def _take_context(self, msg: MissionContext) -> None:
+        self.mission.update_context(msg, authenticated=self.mesh.authenticated)
+
+    def _take_assignment(self, msg: Assignment) -> None:
+        self.mission.update_assignment(msg, authenticated=self.mesh.authenticated)
+
+    async def _pump_commander(self, watch: LivelinessWatch) -> None:
+        """The Commander's token: authority starts and ends with it; each appearance is a
+        (possibly new) session to catch up with."""
+        async for key, alive in watch:
+            if key != self.keys.alive_cmdr:
+                continue
+            self._changed(self.mission.commander_alive, alive)
+            if alive:
+                self._need_catch_up.set()
 
     def _changed(self, update: Callable[[T], None], msg: T) -> None:
         before = self.mission.changes
         update(msg)
         if self.mission.changes != before:
             self._announce()
+
+    def refusals(self) -> tuple[Counter[str], int]:
+        """Everything this daemon refused so far by cause (payloads, peers' messages and
+        beacons, Commander payloads, simulator payloads) and expected messages that never
+        came: what its reports carry to the run summary."""
+        out: Counter[str] = Counter(self.mesh.codec.stats.rejected)
+        stats = getattr(self.link, "stats", None)
+        missing = 0
+        if stats is not None:
+            out.update({k: v for k, v in stats.rejected.items() if k not in RADIO_DROPS})
+            missing = stats.missing
+        out.update(self.mission.rejected)
+        out.update(getattr(self.ports.perception, "rejected", {}))
+        return out, missing
+
+    def _counters(self) -> dict[str, Any]:
+        rejected, missing = self.refusals()
+        return {
+            "decode_errors": self.mesh.codec.stats.total,
+            "rejected": dict(rejected.most_common(MAX_CAUSES)),
+            "missing_messages": missing,
+        }
+
+    def _final_report(self) -> None:
+        """The last counters, as the daemon stops (what no round report carried yet)."""
+        view = self.mission.view()
+        with contextlib.suppress(MeshError):
+            self.mesh.put(
+                self.keys.report(self.uav),
+                ProgressReport(
+                    h=self.headers.next(), phase="final", uav=self.uav,
+                    mission_id=view.mission_id if view else (
+                        self.mission.context.mission_id if self.mission.context else ""),
+                    episode=-1, round=-1, role=view.role if view else "", skill="",
+                    invocation="", label=None, held=True, **self._counters(),
+                ),
+                block=True,
+            )  # fmt: skip
 
     def _announce(self) -> None:
         """Tell the Commander which assignment this daemon now flies by (a rebuilt context)."""
@@ -212,7 +281,7 @@ class UavDaemon:
                 invocation="",
                 label=None,
                 held=True,
-                decode_errors=self.mesh.codec.stats.total,
+                **self._counters(),
             ),
         )
 
@@ -229,9 +298,34 @@ class UavDaemon:
     async def _catch_up(self) -> None:
         """A late or restarted daemon asks for the current context and its assignment."""
         for _key, ctx in await self.mesh.get(self.keys.context, MissionContext, timeout_s=1.0):
-            self.mission.update_context(ctx)
+            self._changed(self._take_context, ctx)
         for _key, a in await self.mesh.get(self.keys.assign(self.uav), Assignment, timeout_s=1.0):
-            self.mission.update_assignment(a)
+            self._changed(self._take_assignment, a)
+
+    def _caught_up(self) -> bool:
+        m = self.mission
+        return m.context is not None and m.assignment is not None
+
+    async def _keep_caught_up(self) -> None:
+        """Query whenever the Commander's token appears, then with backoff while it is
+        alive and this daemon lacks its context or assignment (a publish that raced our
+        link, or a plan not made yet). Bounded: one query pair per wait, waits double up
+        to ``CATCH_UP_RETRY_S[1]``."""
+        first, longest = CATCH_UP_RETRY_S
+        while True:
+            await self._need_catch_up.wait()
+            self._need_catch_up.clear()
+            wait = first
+            while True:
+                with contextlib.suppress(MeshError):  # closing: the task is cancelled next
+                    await self._catch_up()
+                if self._caught_up() or not self.mission.commander_is_alive:
+                    break
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(wait):
+                        await self._need_catch_up.wait()  # a new token: ask at once
+                self._need_catch_up.clear()
+                wait = min(2 * wait, longest)
 
     async def run(self) -> DaemonStats:
         """Run until the clock says the run is over (or the task is cancelled)."""
@@ -239,9 +333,11 @@ class UavDaemon:
         # sees the token may publish at once, and that must reach us.
         context = self.mesh.subscribe(self.keys.context, MissionContext)
         assignment = self.mesh.subscribe(self.keys.assign(self.uav), Assignment)
+        commander = self.mesh.watch_liveliness(self.keys.alive_cmdr)
         self._tasks = [
             asyncio.create_task(self._pump_context(context), name=f"{self.uav}-context"),
             asyncio.create_task(self._pump_assignment(assignment), name=f"{self.uav}-assignment"),
+            asyncio.create_task(self._pump_commander(commander), name=f"{self.uav}-commander"),
         ]
         if self.memory is not None and self.cfg.agent.share_experience:
             shared = self.mesh.subscribe(self.keys.experience("*"), ExperienceRecord)
@@ -253,10 +349,14 @@ class UavDaemon:
                 await self._peer_link.start()
             await self._catch_up()
             self._announce()
+            self._tasks.append(
+                asyncio.create_task(self._keep_caught_up(), name=f"{self.uav}-catch-up")
+            )
             while True:
                 tick = await self.ports.clock.next_round()
                 await self._absorb_rewards()
                 if tick is None:
+                    self._final_report()
                     break
                 view = self.mission.view()
                 # Flight phases: launch once a mission is assigned; land/return when it ends.
@@ -345,11 +445,11 @@ class UavDaemon:
                 cpu_s=out.cpu_s,
                 messages_sent=len(out.sent),
                 messages_dropped=out.dropped,
-                decode_errors=self.mesh.codec.stats.total,
                 corrected=out.corrected,
                 llm_calls=llm_calls,
                 llm_class=str(llm_class),
                 decision=self._decision(out),
+                **self._counters(),
             ),
         )
 

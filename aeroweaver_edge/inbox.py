@@ -35,6 +35,9 @@ from aeroweaver_edge.wire import InboxMessage, MsgRef, Vec3
 
 log = logging.getLogger(__name__)
 
+# Drops that are the radio model at work (the routing rule), not refusals of bad input:
+# left out of security counts.
+RADIO_DROPS = frozenset({"out_of_range"})
 ARRIVED_MEMORY = 4096  # (sender, seq) pairs remembered so an early arrival is not "missing"
 POSITION_MEMORY = 16  # rounds of own positions kept for judging late messages
 
@@ -240,4 +243,4 @@ class Inbox:
         return True
 
 
-__all__ = ["Inbox", "PeerLimits", "PeerStats", "within"]
+__all__ = ["RADIO_DROPS", "Inbox", "PeerLimits", "PeerStats", "within"]

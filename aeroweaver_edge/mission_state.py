@@ -63,6 +63,11 @@ class MissionState:
             self.assignment = a
             self.changes += 1
 
+    @property
+    def commander_is_alive(self) -> bool:
+        """The Commander's token is up (as last told by ``commander_alive``)."""
+        return self._alive
+
     def commander_alive(self, alive: bool) -> None:
         """The Commander's liveliness token appeared (True) or went away (False)."""
         if alive == self._alive:

@@ -73,6 +73,12 @@ class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
     ttl_rounds: int = 8
 
 
+MAX_CAUSES: Final = 64
+Cause = Annotated[str, msgspec.Meta(max_length=64)]
+Causes = Annotated[dict[Cause, int], msgspec.Meta(max_length=MAX_CAUSES)]
+"""Counts by a fixed cause name (e.g. payloads a receiver refused): small and bounded."""
+
+
 class DecisionDetail(msgspec.Struct, frozen=True, kw_only=True):
     """Why a UAV chose what it chose (for traces, the console and benchmarks): its labelled
     options, the selector's base scores, the experience advantages and the pick."""
@@ -89,10 +95,11 @@ class DecisionDetail(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
-    """Per-round progress, or (``phase="ready"``) the ack that a UAV holds its assignment."""
+    """Per-round progress, (``phase="ready"``) the ack that a UAV holds its assignment, or
+    (``phase="final"``) the daemon's last counters as it stops."""
 
     h: Header
-    phase: Literal["round", "ready"] = "round"
+    phase: Literal["round", "ready", "final"] = "round"
     uav: str
     mission_id: str
     episode: int
@@ -117,6 +124,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     llm_class: str = ""  # the selector's current logprob class (probe kind), if any
     prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
     decision: DecisionDetail | None = None  # options, scores, advantages, pick (round phase)
+    rejected: Causes = {}  # cumulative: everything this daemon refused, by cause
+    missing_messages: int = 0  # cumulative: expected messages that never came
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):

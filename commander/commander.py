@@ -52,7 +52,10 @@ class Commander:
         await cancel_all(self._tasks)
 
     async def _pump_reports(self, reports: Subscription[ProgressReport]) -> None:
-        async for _key, rep in reports:
+        async for key, rep in reports:
+            if key != self.keys.report(rep.uav):
+                self.board.foreign += 1  # a UAV reports only on its own key
+                continue
             if self.board.add(rep):
                 for listener in self.report_listeners:
                     listener(rep)

@@ -28,6 +28,8 @@ class UavProgress:
     # Per-round latency, bounded: a long field mission must not grow the Commander.
     latencies_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
     cpu_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
+    rejected: dict[str, int] = field(default_factory=dict)  # the daemon's refusals (latest)
+    missing_messages: int = 0  # expected messages that never reached it (latest)
 
 
 @dataclass
@@ -37,6 +39,7 @@ class ProgressBoard:
     foreign: int = 0  # reports for another mission, or whose sender is not the reporting UAV
     ready: dict[str, str] = field(default_factory=dict)  # uav -> role it acknowledged
     episode_tokens: dict[int, int] = field(default_factory=dict)  # decision tokens per episode
+    max_episodes: int = 4096  # bound: reports cannot grow the board without limit
 
     def add(self, rep: ProgressReport) -> bool:
         """Take a report; False (counted in ``foreign``) if it is not for this mission or
@@ -47,7 +50,16 @@ class ProgressBoard:
         if rep.phase == "ready":
             self.ready[rep.uav] = rep.role
             return True
+        fresh = rep.phase == "round" and rep.episode not in self.episode_tokens
+        if fresh and len(self.episode_tokens) >= self.max_episodes:
+            self.foreign += 1  # a flood of made-up episode numbers
+            return False
         p = self.uavs.setdefault(rep.uav, UavProgress(rep.uav))
+        # Counters are cumulative in the daemon: the latest report has them all.
+        p.rejected = dict(rep.rejected)
+        p.missing_messages = rep.missing_messages
+        if rep.phase == "final":
+            return True
         p.role = rep.role
         p.last = rep
         p.reports += 1

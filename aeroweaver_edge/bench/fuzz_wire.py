@@ -9,7 +9,9 @@ spoofed senders, long text), with random, stale or genuine signature attachments
 goes through what a secured node does with it:
 
     Codec.decode -> Verifier.check -> PeerLink._on_beacon / _on_inbox / _on_alive,
-    MissionState.update_context / update_assignment, ExperienceMemory.ingest
+    MissionState.update_context / update_assignment, ExperienceMemory.ingest,
+    SimLink.on_perception / on_reward / on_episode (a daemon's link to the world),
+    CommandCheck.admit + bound (the world's check of simulator commands)
 
 Every case must end in exactly one bucket (rejected with a counted reason, accepted, or
 ignored as older/duplicate data) and nothing may raise. Prints one JSON document; exits 1
@@ -36,12 +38,15 @@ import msgspec
 
 from aeroweaver_edge.agent.memory import ExperienceMemory
 from aeroweaver_edge.config import MeshConfig
+from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.mission_state import MissionState
 from aeroweaver_edge.peers import PeerLimits, PeerLink
 from aeroweaver_edge.security.identity import SwarmPki, default_members
 from aeroweaver_edge.security.pki import load_signing_key
 from aeroweaver_edge.security.signing import Signer, Verifier
+from aeroweaver_edge.sim.command_check import CommandCheck
+from aeroweaver_edge.vehicle.sim import SimLink
 from aeroweaver_edge.wire import (
     Assignment,
     Codec,
@@ -64,6 +69,7 @@ from aeroweaver_edge.wire import (
 SWARM = "fz"
 K = Keys(SWARM)
 ME = "uav0"
+WHERE = (0, 1)  # the round the world is collecting commands for
 NAMES = ["uav0", "uav1", "uav2", "cmdr", "world", "uav9", "", "x" * 300, "uav1\x00", "é"]
 KINDS: dict[str, type[msgspec.Struct]] = {
     "state": StateBeacon,
@@ -337,6 +343,9 @@ class Harness:
     mission: MissionState
     memory: ExperienceMemory
     verifier: Verifier | None
+    sim: SimLink
+    check: CommandCheck
+    world: KinematicWorld
     codec: Codec = field(default_factory=Codec)
     outcomes: Counter[str] = field(default_factory=Counter)
     errors: list[str] = field(default_factory=list)
@@ -397,7 +406,27 @@ class Harness:
             if not msg.uav == msg.h.sender == case.key.split("/")[-2]:
                 return "rejected"
             return "accepted" if self.memory.ingest(msg) else "ignored"
-        return "accepted"  # decoded (and verified): the world/Commander handle it (phase 2)
+        if isinstance(msg, SimCommand):  # the world's side
+            cmd = self.check.admit(case.key, msg, WHERE, ())
+            if cmd is None:
+                return "rejected"
+            self.check.bound(self.world, cmd.uav, cmd.vel)
+            return "accepted"
+        why: str | None = None
+        if isinstance(msg, SimPerception):
+            why = self.sim.on_perception(msg)
+            self.sim._next = None  # the daemon took it
+        elif isinstance(msg, SimReward):
+            why = self.sim.on_reward(msg)
+            self.sim.drain()
+        elif isinstance(msg, SimEpisode):
+            why = self.sim.on_episode(msg)
+        else:
+            return "accepted"  # a progress report: the Commander's board counts foreign ones
+        if why is not None:
+            self.sim.rejected[why] += 1
+            return "rejected"
+        return "accepted"
 
 
 async def _make_link(pki: SwarmPki | None) -> tuple[Mesh, PeerLink]:
@@ -429,7 +458,12 @@ async def _run(cases: int, seed: int, secured: bool) -> dict[str, Any]:
             mission = MissionState(ME, track_commander=True)
             mission.commander_alive(True)
             memory = ExperienceMemory(None)
-            harness = Harness(link, mission, memory, verifier)
+            world = KinematicWorld()
+            for i, uav in enumerate(("uav0", "uav1", "uav2")):
+                world.add_uav(uav, (10.0 * i, 0.0))
+            sim = SimLink(mesh, K, ME, HeaderFactory(ME))
+            check = CommandCheck(K, ("uav0", "uav1", "uav2"))
+            harness = Harness(link, mission, memory, verifier, sim, check, world)
             fuzzer = Fuzzer(seed, signers)
             by_topic: Counter[str] = Counter()
             t0 = time.perf_counter()
@@ -444,6 +478,8 @@ async def _run(cases: int, seed: int, secured: bool) -> dict[str, Any]:
     reasons = Counter(harness.codec.stats.rejected)
     reasons.update(link.stats.rejected)
     reasons.update({f"mission:{k}": v for k, v in mission.rejected.items()})
+    reasons.update({f"sim:{k}": v for k, v in harness.sim.rejected.items()})
+    reasons.update({f"world:{k}": v for k, v in harness.check.refused.items()})
     return {
         "cases": cases,
         "seed": seed,

@@ -8,7 +8,10 @@
   (asyncio on both ends), for plain TCP, TLS (mutual), TLS + ACL, TLS + ACL + signatures;
 - ``crypto``: Ed25519 sign and verify (with the authorisation check) per payload type;
 - ``per_round``: the signature CPU one simulated round adds to the swarm, from the messages
-  a lockstep round sends (an estimate built from ``crypto``, not a full run).
+  a lockstep round sends (an estimate built from ``crypto``, not a full run);
+- ``runs`` (``--runs 3 10``): whole ``aeroweaver sim`` runs (scripted selector), secured vs
+  ``--insecure``, alternating: the world's wall time per round and per run, and whether the
+  returns are identical (they must be: security changes nothing a UAV decides).
 
 Prints one JSON document. Figures on a loaded machine are noisy: compare modes from the
 same run, and re-run on an idle machine for absolute numbers.
@@ -220,20 +223,24 @@ def bench_crypto(pki: SwarmPki, n: int) -> dict[str, dict[str, float]]:
 def per_round(crypto: dict[str, dict[str, float]], uavs: int, messages: int) -> dict[str, float]:
     """Signature CPU per lockstep round for the whole swarm (sign once, verify per receiver).
 
-    Per UAV and round: one beacon (to N-1 peers and the Commander), one command (world),
-    one report (Commander), ``messages`` directed messages; the world sends a perception
-    and a reward per UAV. Experience records are per episode, not per round."""
+    Per UAV and round, as a simulated run sends them: one beacon (signed; in simulation no
+    peer follows beacons, so nobody verifies it), one command (the world verifies it), one
+    report (the Commander), ``messages`` broadcasts (each verified by the N-1 peers); the
+    world signs a perception and a reward per UAV, which that UAV verifies. Experience
+    records are per episode, not per round."""
     c = crypto
     n = uavs
     sign = n * (
         c["beacon"]["sign_us"] + 2 * c["command"]["sign_us"] + messages * c["inbox"]["sign_us"]
     )
     sign += 2 * n * c["perception"]["sign_us"]  # world: perception + reward
-    verify = n * (n * c["beacon"]["verify_us"] + messages * c["inbox"]["verify_us"])
+    verify = n * messages * (n - 1) * c["inbox"]["verify_us"]
     verify += n * (2 * c["command"]["verify_us"] + 2 * c["perception"]["verify_us"])
     return {
         "uavs": n,
         "messages_per_uav": messages,
+        "signatures": n * (3 + messages) + 2 * n,
+        "verifications": n * messages * (n - 1) + 4 * n,
         "swarm_cpu_ms": round((sign + verify) / 1e3, 2),
     }
 
@@ -274,17 +281,76 @@ def bench_pki(repeats: int) -> dict[str, dict[str, float]]:
     return out
 
 
-async def run(rtt_n: int, open_n: int, crypto_n: int) -> dict[str, Any]:
+async def bench_runs(
+    sizes: Sequence[int], rounds: int, seed: int, task: str, repeats: int
+) -> list[dict[str, Any]]:
+    """Secured vs insecure whole runs, alternating so load drifts hit both alike."""
+    from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
+
+    out = []
+    for n in sizes:
+        walls: dict[str, list[float]] = {"secured": [], "insecure": []}
+        rounds_wall: dict[str, list[float]] = {"secured": [], "insecure": []}
+        returns: dict[str, set[str]] = {"secured": set(), "insecure": set()}
+        sent: list[float] = []
+        for _ in range(repeats):
+            for mode in ("insecure", "secured"):
+                opts = SwarmOptions(task=task, uavs=n, seed=seed, max_rounds=rounds,
+                                    selector="scripted", deadline_s=30.0,
+                                    secure=mode == "secured")  # fmt: skip
+                summary = await run_swarm(opts)
+                walls[mode].append(summary.wall_s)
+                rounds_wall[mode].extend(summary.round_wall_s)
+                data = summary.as_dict()
+                returns[mode].add(json.dumps(data["agent_returns"], sort_keys=True))
+                sent.append(data["messages_sent"] / max(1, data["rounds"] * n))
+        row: dict[str, Any] = {"uavs": n, "task": task, "rounds": rounds, "repeats": repeats}
+        row["messages_per_uav_round"] = round(statistics.mean(sent), 2)
+        for mode in ("insecure", "secured"):
+            row[mode] = {
+                "round_ms": _ms(rounds_wall[mode]) | {"p95_ms": _p95_ms(rounds_wall[mode])},
+                "run_s": round(statistics.median(walls[mode]), 3),
+            }
+        row["round_overhead_ms"] = round(
+            row["secured"]["round_ms"]["median_ms"] - row["insecure"]["round_ms"]["median_ms"], 2
+        )
+        row["same_returns"] = len(returns["secured"] | returns["insecure"]) == 1
+        out.append(row)
+    return out
+
+
+def _p95_ms(xs: list[float]) -> float:
+    ys = sorted(xs)
+    return round(ys[int(0.95 * (len(ys) - 1))] * 1e3, 2)
+
+
+async def run(
+    rtt_n: int,
+    open_n: int,
+    crypto_n: int,
+    runs: Sequence[int] = (),
+    rounds: int = 24,
+    seed: int = 1,
+    task: str = "coverage",
+    repeats: int = 2,
+) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as d:
         pki = SwarmPki.create(Path(d), SWARM, default_members(2))
         crypto = bench_crypto(pki, crypto_n)
-        return {
+        out: dict[str, Any] = {
             "pki": bench_pki(max(3, open_n // 2)),
             "open": await bench_open(pki, open_n),
             "rtt": await bench_rtt(pki, rtt_n),
             "crypto": crypto,
             "per_round": [per_round(crypto, n, m) for n, m in ((3, 2), (10, 4))],
         }
+    if runs:
+        out["runs"] = await bench_runs(runs, rounds, seed, task, repeats)
+        # The estimate for the traffic those runs really had, next to their measured cost.
+        for row in out["runs"]:
+            est = per_round(crypto, row["uavs"], max(1, round(row["messages_per_uav_round"])))
+            row["signature_cpu_estimate_ms"] = est["swarm_cpu_ms"]
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -293,9 +359,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--rtt", type=int, default=1000, help="timed round trips per mode")
     p.add_argument("--opens", type=int, default=10, help="session opens per mode")
     p.add_argument("--crypto", type=int, default=2000, help="sign/verify calls per payload")
+    p.add_argument("--runs", type=int, nargs="*", default=[], help="whole runs at these sizes")
+    p.add_argument("--rounds", type=int, default=24, help="runs: rounds per run")
+    p.add_argument("--seed", type=int, default=1, help="runs: layout seed")
+    p.add_argument("--task", default="coverage", help="runs: task")
+    p.add_argument("--repeats", type=int, default=2, help="runs: runs per mode and size")
     args = p.parse_args(argv)
-    print(json.dumps(asyncio.run(run(args.rtt, args.opens, args.crypto)), indent=1))
-    return 0
+    out = asyncio.run(
+        run(args.rtt, args.opens, args.crypto, args.runs, args.rounds, args.seed, args.task,
+            args.repeats)
+    )  # fmt: skip
+    print(json.dumps(out, indent=1))
+    return 0 if all(r["same_returns"] for r in out.get("runs", [])) else 1
 
 
 if __name__ == "__main__":

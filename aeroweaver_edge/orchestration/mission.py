@@ -5,6 +5,10 @@ backend, flying the plan's task with the plan's roles.
 The mission text is parsed once, against the live roster. The Commander never flies: it
 publishes context and assignments and reads reports. Ending the mission (termination,
 horizon or Ctrl-C) publishes the ended context, so every UAV holds.
+
+In a secured swarm (``mesh.security``, e.g. from ``--keys``) the Commander runs as the
+``cmdr`` identity with its boot counter, and the world, when run here, as ``world`` on its
+own session (``world_mesh``): only the world identity may publish under ``sim/``.
 """
 
 from __future__ import annotations
@@ -17,10 +21,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aeroweaver_edge import defaults as d
-from aeroweaver_edge.config import LLMConfig, MeshConfig, SimConfig
+from aeroweaver_edge.config import ConfigError, LLMConfig, MeshConfig, SimConfig
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.orchestration.swarm import world_task
+from aeroweaver_edge.security.identity import COMMANDER, WORLD
+from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from commander.commander import Commander
 from commander.harness import plan_from_text
@@ -41,6 +47,7 @@ class MissionStartOptions:
     episodes: int = 1
     max_rounds: int = d.MAX_ROUNDS
     deadline_s: float = d.DEADLINE_S
+    world_mesh: MeshConfig | None = None  # the world's own session (secured); None: shares ours
 
 
 async def start_mission(
@@ -49,9 +56,12 @@ async def start_mission(
 ) -> dict[str, Any]:
     started = time.monotonic()
     out: dict[str, Any] = {"text": opts.text, "episodes": [], "ended": "not started"}
+    if opts.sim_world and opts.mesh.security is not None and opts.world_mesh is None:
+        raise ConfigError("a secured mission with the sim world needs the world identity's mesh")
     async with contextlib.AsyncExitStack() as stack:
-        mesh = await Mesh.open(opts.mesh, node_id="cmdr")
+        mesh = await Mesh.open(opts.mesh, node_id=COMMANDER)
         stack.push_async_callback(mesh.aclose)
+        headers = await asyncio.to_thread(boot_headers, opts.mesh, COMMANDER)
         roster = await discover_roster(mesh, opts.swarm, opts.roster_wait_s)
         if not roster:
             raise RuntimeError(
@@ -60,7 +70,7 @@ async def start_mission(
         out["roster"] = roster
         plan = await plan_from_text(opts.text, roster, opts.llm, opts.top_k)
         out["mission"] = plan.as_dict()
-        commander = Commander(mesh, opts.swarm)
+        commander = Commander(mesh, opts.swarm, headers)
         await commander.start()
         stack.push_async_callback(commander.aclose)
         commander.publish(plan)
@@ -78,7 +88,14 @@ async def start_mission(
                     if on_round is not None:
                         await on_round(log, commander.board)
 
-                runner = WorldRunner(mesh, opts.swarm, task, cfg, on_round=hook)
+                world_mesh, world_headers = mesh, None
+                if opts.world_mesh is not None:
+                    world_mesh = await Mesh.open(opts.world_mesh, node_id=WORLD)
+                    stack.push_async_callback(world_mesh.aclose)
+                    world_headers = await asyncio.to_thread(boot_headers, opts.world_mesh, WORLD)
+                runner = WorldRunner(
+                    world_mesh, opts.swarm, task, cfg, on_round=hook, headers=world_headers
+                )
                 await runner.start()
                 stack.push_async_callback(runner.aclose)
                 await runner.wait_alive(plan.participants, 10.0)

@@ -1,15 +1,20 @@
 """The honest parts of a run summary, computed from the Commander's progress board: holds
-by cause, deadline misses on both sides, LLM requests, and the logprob class the daemons
-actually ended up with (which may differ from the start-up probe).
+by cause, deadline misses on both sides, LLM requests, the logprob class the daemons
+actually ended up with (which may differ from the start-up probe), and what protected the
+run and what each side refused (``security``).
 """
 
 from __future__ import annotations
 
 from collections import Counter
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aeroweaver_edge.hold_reasons import count_causes
 from commander.progress import ProgressBoard
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.sim.runner import WorldRunner
 
 
 def holds_by_cause(board: ProgressBoard) -> dict[str, int]:
@@ -59,4 +64,37 @@ def health_fields(
         "llm_calls": llm_calls(board),
         "llm_classes": llm_classes(board),
         "probe": probe_after_run(probe_line, probe_kind, board) or probe_line,
+    }
+
+
+def security_fields(
+    world_mesh: Mesh, cmdr_mesh: Mesh, runner: WorldRunner, board: ProgressBoard
+) -> dict[str, Any]:
+    """The summary's ``security`` object: what protected the run (TLS with mutual
+    authentication, the ACL, signatures; from the world's session, every session of a run
+    is configured alike) and everything refused, by cause and side. Refusals by the Zenoh
+    ACL happen inside Zenoh and are not countable here (docs/security.md)."""
+    base = world_mesh.security_summary()
+    daemons: Counter[str] = Counter()
+    for p in board.uavs.values():
+        daemons.update(p.rejected)
+    commander: Counter[str] = Counter(cmdr_mesh.codec.stats.rejected)
+    if board.foreign:
+        commander["foreign_report"] += board.foreign
+    world = runner.refusals()
+    total = world + commander + daemons
+    return {
+        **{k: base[k] for k in ("tls", "mtls", "acl", "signed")},
+        **({"identities_version": base["identities_version"]} if base.get("tls") else {}),
+        "rejected": dict(total.most_common()),
+        "rejected_total": sum(total.values()),
+        "rejected_by_side": {
+            "world": dict(world.most_common()),
+            "commander": dict(commander.most_common()),
+            "daemons": dict(daemons.most_common()),
+        },
+        "refused_commands": dict(runner.check.refused.most_common()),
+        "clamped_commands": dict(runner.check.clamped.most_common()),
+        "missing_messages": runner.missing_messages
+        + sum(p.missing_messages for p in board.uavs.values()),
     }

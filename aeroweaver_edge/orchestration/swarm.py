@@ -7,6 +7,11 @@ one daemon per participant decides. Every daemon has its own Zenoh session, eith
 in this event loop or, with ``processes=True``, as its own OS process started with
 ``aeroweaver daemon`` (spawned, so no Zenoh session is ever forked). Both modes run the same
 code and, for a deterministic selector, give the same returns for the same seed.
+
+Runs are secured by default (``network.py``): a throw-away PKI per run, TLS with mutual
+authentication, the swarm ACL and signatures on every session; ``secure=False`` (``sim
+--insecure``) keeps plain loopback TCP. Either way the summary's ``security`` object says
+what protected the run and what every side refused.
 """
 
 from __future__ import annotations
@@ -14,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import socket
 import tempfile
 import time
 import uuid
@@ -31,9 +35,13 @@ from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
+from aeroweaver_edge.orchestration.network import RunNetwork, run_network
+from aeroweaver_edge.orchestration.network import free_port as free_port
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
-from aeroweaver_edge.orchestration.run_health import health_fields
+from aeroweaver_edge.orchestration.run_health import health_fields, security_fields
 from aeroweaver_edge.orchestration.trace import TraceRecorder
+from aeroweaver_edge.security.identity import COMMANDER, WORLD
+from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.tasks import create, get_spec
@@ -68,6 +76,7 @@ class SwarmOptions:
     history_rounds: int = d.HISTORY_ROUNDS  # AgentConfig.history_rounds (0: no history)
     state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
     trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
+    secure: bool = True  # TLS (mutual) + ACL + signatures with per-run identities
 
 
 @dataclass
@@ -108,6 +117,7 @@ class RunSummary:
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
     link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
+    security: dict[str, Any] = field(default_factory=dict)  # security_fields()
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -155,6 +165,7 @@ class RunSummary:
             "wall_s": round(self.wall_s, 3),
             "note": self.note,
             "trace": self.trace,
+            "security": self.security,
             **({"link": self.link} if self.link else {}),
         }
 
@@ -187,12 +198,6 @@ def _per_decision(prompt: int, cached: int, completion: int, calls: int) -> dict
         "prompt_uncached": round((prompt - cached) / calls, 1),
         "completion": round(completion / calls, 2),
     }
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def mesh_configs(namespace: str, *, star: bool = True) -> tuple[MeshConfig, MeshConfig]:
@@ -266,6 +271,7 @@ async def run_swarm(
     plan_factory: Callable[[list[str]], Awaitable[MissionPlan]] | None = None,
     fault: Callable[[RoundLog, DaemonSet], Awaitable[None]] | None = None,
     on_commander: Callable[[Commander], None] | None = None,
+    on_network: Callable[[RunNetwork], None] | None = None,
 ) -> RunSummary:
     started = time.monotonic()
     async with contextlib.AsyncExitStack() as stack:
@@ -315,15 +321,23 @@ async def run_swarm(
             deadline_s=opts.deadline_s,
         )
         namespace = f"aw-{uuid.uuid4().hex[:10]}"
-        seed_mesh_cfg, peer_mesh_cfg = mesh_configs(namespace)
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="aeroweaver-")))
         memory_dir = opts.memory_dir or tmp
         memory_dir.mkdir(parents=True, exist_ok=True)
+        net = await stack.enter_async_context(
+            run_network(opts.secure, tmp / "pki", opts.swarm, namespace, uavs)
+        )
+        if on_network is not None:
+            on_network(net)
 
-        world_mesh = await Mesh.open(seed_mesh_cfg, node_id="world")
+        world_mesh = await Mesh.open(net.config(WORLD), node_id=WORLD)
         stack.push_async_callback(world_mesh.aclose)
-        cmdr_mesh = await Mesh.open(peer_mesh_cfg, node_id="cmdr")
+        cmdr_mesh = await Mesh.open(net.config(COMMANDER), node_id=COMMANDER)
         stack.push_async_callback(cmdr_mesh.aclose)
+        world_headers, cmdr_headers = await asyncio.gather(
+            asyncio.to_thread(boot_headers, net.config(WORLD), WORLD),
+            asyncio.to_thread(boot_headers, net.config(COMMANDER), COMMANDER),
+        )
 
         board_ref: dict[str, ProgressBoard] = {}
 
@@ -350,11 +364,11 @@ async def run_swarm(
             )
         runner = WorldRunner(
             world_mesh, opts.swarm, task, sim_cfg, on_round=round_hook,
-            vehicles=linked.bridge if linked else None,
+            vehicles=linked.bridge if linked else None, headers=world_headers,
         )  # fmt: skip
         await runner.start()
         stack.push_async_callback(runner.aclose)
-        commander = Commander(cmdr_mesh, opts.swarm)
+        commander = Commander(cmdr_mesh, opts.swarm, cmdr_headers)
         if recorder is not None:
             commander.report_listeners.append(recorder.on_report)
         await commander.start()
@@ -368,7 +382,7 @@ async def run_swarm(
             UavConfig(
                 uav=u,
                 swarm=opts.swarm,
-                mesh=peer_mesh_cfg,
+                mesh=net.config(u),
                 llm=llm.model_copy(update={"slot": i % n_slots}) if pin_slots else llm,
                 agent=AgentConfig(
                     selector=opts.selector,
@@ -471,6 +485,7 @@ async def run_swarm(
             [x for p in board.uavs.values() for x in p.latencies_s]
         )
         summary.decision_cpu_s = percentiles([x for p in board.uavs.values() for x in p.cpu_s])
+        summary.security = security_fields(world_mesh, cmdr_mesh, runner, board)
         if recorder is not None:
             summary.trace = str(recorder.write())
     summary.wall_s = time.monotonic() - started

@@ -15,10 +15,13 @@ from commander.progress import ProgressBoard
 
 
 class LiveView:
-    """Prints one compact block per round; works on a TTY and in a log file alike."""
+    """Prints one compact block per round; works on a TTY and in a log file alike. When
+    anything was refused since the last round (a forged, malformed or foreign payload or
+    command, by the world or a daemon), one more line says what, where and why."""
 
     def __init__(self, console: Console | None = None) -> None:
         self.console = console or Console(stderr=False, highlight=False)
+        self._refused_seen: dict[str, dict[str, int]] = {}  # uav -> cumulative counts seen
 
     async def on_round(self, log: RoundLog, board: ProgressBoard) -> None:
         res = log.result
@@ -48,6 +51,27 @@ class LiveView:
             soft_wrap=True,
             markup=False,
         )
+        refused = self._new_refusals(log, board)
+        if refused:
+            self.console.print(f"  refused: {refused}", soft_wrap=True, markup=False)
+
+    def _new_refusals(self, log: RoundLog, board: ProgressBoard) -> str:
+        """``world non_finite x1; uav1 bad_signature x3`` for what is new since last round."""
+        parts = []
+        if log.refused:
+            parts.append(f"world {_counts(log.refused)}")
+        for uav in sorted(board.uavs, key=natural):
+            now = board.uavs[uav].rejected
+            before = self._refused_seen.get(uav, {})
+            new = {k: n - before.get(k, 0) for k, n in now.items() if n > before.get(k, 0)}
+            self._refused_seen[uav] = dict(now)
+            if new:
+                parts.append(f"{uav} {_counts(new)}")
+        return "; ".join(parts)
+
+
+def _counts(counts: dict[str, int]) -> str:
+    return ", ".join(f"{k} x{n}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1]))
 
 
 def print_mission(mission: dict[str, Any], console: Console) -> None:
@@ -131,5 +155,15 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
             f"{u} (episode {w[0]}, round {w[1] + 1})" for u, w in summary["lost_uavs"].items()
         )
         console.print(f"[bold red]lost daemons[/]: {lost}; the world held them from then on")
+    sec = summary.get("security") or {}
+    if sec:
+        on = [k for k in ("tls", "acl", "signed") if sec.get(k)]
+        what = "secured: " + ", ".join(on) if on else "INSECURE (no TLS, ACL or signatures)"
+        line = f"{what}; refused {sec.get('rejected_total', 0)}"
+        if sec.get("rejected"):
+            line += f" ({escape(_counts(sec['rejected']))})"
+        if sec.get("missing_messages"):
+            line += f"; expected messages that never came {sec['missing_messages']}"
+        console.print(line)
     if summary.get("note"):
         console.print(f"[yellow]note[/]: {escape(summary['note'])}")

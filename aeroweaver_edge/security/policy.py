@@ -18,8 +18,10 @@ Per role (S = ``aw/<swarm>``, after the Zenoh namespace if one is set):
 | router    | S/** (it relays for everyone)           | S/**                     | S/**           |
 
 Reads (subscribe, query, and what a node sends *to* that subject) are least privilege too:
-a UAV reads beacons, its own inbox, shared experience, the context, its own assignment and
-its own simulator perception and reward, so private facts do not cross UAVs.
+a UAV reads beacons, its own inbox, every peer's broadcast key, shared experience, the
+context, its own assignment and its own simulator perception and reward, so private facts
+do not cross UAVs. The world reads the UAVs' simulator commands, beacons and the radio its
+world-flown listeners (the eavesdropper) hear: broadcasts and their inboxes.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ def grants(keys: Keys, name: str, role: Role) -> Grants:
             read=(
                 keys.state("*"),
                 keys.inbox(name, "*"),
+                keys.broadcast("*"),
                 keys.experience("*"),
                 keys.context,
                 keys.assign(name),
@@ -89,7 +92,15 @@ def grants(keys: Keys, name: str, role: Role) -> Grants:
             write=(f"{s}/sim/**",),
             serve=(f"{s}/sim/**",),
             token=(f"{s}/alive/world",),
-            read=(keys.sim_command("*"), keys.state("*"), f"{s}/sim/**"),
+            # World-flown listeners (the eavesdropper) hear broadcasts and their own inbox;
+            # their names are not identities, so the inbox grant cannot name them.
+            read=(
+                keys.sim_command("*"),
+                keys.state("*"),
+                keys.broadcast("*"),
+                keys.inbox("*", "*"),
+                f"{s}/sim/**",
+            ),
             alive=alive,
         )
     if role is Role.CENTRAL:

@@ -22,7 +22,7 @@ from pathlib import Path
 from aeroweaver_edge.config import MeshConfig, SafetyConfig
 from aeroweaver_edge.peers import PeerLimits
 from aeroweaver_edge.security.boot import MAX_EPOCH_STEP, next_epoch
-from aeroweaver_edge.security.identity import SwarmPki, default_members
+from aeroweaver_edge.security.identity import IdentityList, SwarmPki, default_members
 from aeroweaver_edge.security.policy import Role
 from aeroweaver_edge.wire import HeaderFactory
 
@@ -91,20 +91,26 @@ def boot_headers(cfg: MeshConfig, name: str) -> HeaderFactory:
 
 
 def peer_limits(
-    pki: SwarmPki | None, safety: SafetyConfig, round_s: float, *, margin_m: float = 5.0
+    pki: SwarmPki | IdentityList | None,
+    safety: SafetyConfig,
+    round_s: float,
+    *,
+    margin_m: float = 5.0,
 ) -> PeerLimits:
-    """PeerLink bounds for a swarm: only its UAVs join rosters; beacons must fit the
-    vehicles' speed and the geofence (plus margin); boot-counter epochs bound leaps."""
+    """PeerLink bounds for a swarm: only its UAVs (from the identity list, when secured)
+    join rosters; beacons must fit the vehicles' speed and the geofence (plus margin);
+    boot-counter epochs bound leaps. Without identities the roster stays open."""
     north, east = safety.geofence_north_m, safety.geofence_east_m
     corner = max(abs(north[0]), abs(north[1])) ** 2 + max(abs(east[0]), abs(east[1])) ** 2
     known = None
-    if pki is not None:
-        known = frozenset(n for n, r in pki.identities.roles().items() if r is Role.UAV)
+    ids = pki.identities if isinstance(pki, SwarmPki) else pki
+    if ids is not None:
+        known = frozenset(n for n, r in ids.roles().items() if r is Role.UAV)
     return PeerLimits(
         known_peers=known,
         max_speed_mps=safety.max_speed_mps,
         round_s=round_s,
         motion_margin_m=margin_m,
         max_abs_m=corner**0.5 + safety.altitude_band_m[1] + margin_m,
-        max_epoch_step=MAX_EPOCH_STEP if pki is not None else None,
+        max_epoch_step=MAX_EPOCH_STEP if ids is not None else None,
     )

@@ -20,7 +20,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
@@ -29,8 +29,10 @@ import numpy as np
 
 from aeroweaver_edge.config import SimConfig
 from aeroweaver_edge.defaults import COMM_RADIUS_M
+from aeroweaver_edge.inbox import RADIO_DROPS
 from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.lifecycle import cancel_all
+from aeroweaver_edge.sim.command_check import CommandCheck
 from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
 from aeroweaver_edge.tasks.base import TaskDefinition
 from aeroweaver_edge.wire import (
@@ -71,13 +73,15 @@ class RoundLog:
     # world's opponents (kind "uav", with role), then the static entities.
     bodies: tuple[Entity, ...] = ()
     entities: tuple[Entity, ...] = ()
+    refused: dict[str, int] = field(default_factory=dict)  # world-side refusals this round
 
 
 @dataclass
 class RunnerStats:
     commands: int = 0
     deadline_misses: int = 0
-    rejected_commands: int = 0
+    rejected_commands: int = 0  # refused by the command check (by cause: WorldRunner.check)
+    unknown_tokens: int = 0  # liveliness tokens of ids the world does not fly
     lost: dict[str, tuple[int, int]] = field(default_factory=dict)  # uav -> (episode, round) lost
 
 
@@ -92,6 +96,7 @@ class WorldRunner:
         on_round: Callable[[RoundLog], Awaitable[None]] | None = None,
         comm_radius_m: float = COMM_RADIUS_M,
         vehicles: EmulatorBridge | None = None,
+        headers: HeaderFactory | None = None,
     ) -> None:
         self.mesh = mesh
         self.comm_radius_m = comm_radius_m
@@ -100,14 +105,16 @@ class WorldRunner:
         self.keys = Keys(swarm)
         self.task = task
         self.cfg = cfg
-        self.headers = HeaderFactory("world")
+        self.headers = headers or HeaderFactory("world")
         self.stats = RunnerStats()
+        self.check = CommandCheck(self.keys, task.uav_ids)  # sim/command_check.py
         self.alive: set[str] = set()
         self._on_round = on_round
         self._commands: dict[tuple[int, int], dict[str, SimCommand]] = defaultdict(dict)
         self._changed = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
         self._where: tuple[int, int] = (-1, -1)
+        self._window: tuple[int, int] | None = None  # the round whose commands count now
         self._finished = False
         self._listeners: dict[str, PeerLink] = {}
 
@@ -139,18 +146,20 @@ class WorldRunner:
 
     async def _pump_commands(self) -> None:
         async for key, cmd in self.mesh.subscribe(self.keys.sim_command("*"), SimCommand):
-            if self.keys.uav_of(key) != cmd.uav or cmd.h.sender != cmd.uav:
-                self.stats.rejected_commands += 1  # a UAV may only command its own body
-                continue
-            if (cmd.episode, cmd.round) != self._where:
-                self.stats.rejected_commands += 1  # late, early or foreign: never buffered
-                continue
-            self._commands[(cmd.episode, cmd.round)].setdefault(cmd.uav, cmd)
-            self._changed.set()
+            # Only while this round's commands are collected: late ones are never buffered.
+            where = self._window or (-1, -1)
+            ok = self.check.admit(key, cmd, where, self._commands.get(where, {}))
+            self.stats.rejected_commands = self.check.refused_total
+            if ok is not None:
+                self._commands[where][ok.uav] = ok
+                self._changed.set()
 
     async def _pump_liveliness(self) -> None:
         async for key, alive in self.mesh.watch_liveliness(self.keys.alive_uav("*")):
             uav = last_chunk(key)
+            if uav not in self.task.uav_ids:
+                self.stats.unknown_tokens += alive  # not flown here: never present, never lost
+                continue
             if alive:
                 self.alive.add(uav)
             elif uav in self.alive:
@@ -189,11 +198,15 @@ class WorldRunner:
         self, key: tuple[int, int], expected: set[str]
     ) -> tuple[dict[str, SimCommand], float]:
         started = time.monotonic()
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(self.cfg.deadline_s):
-                while not (expected & self.alive) <= set(self._commands[key]):
-                    self._changed.clear()
-                    await self._changed.wait()
+        self._window = key
+        try:
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(self.cfg.deadline_s):
+                    while not (expected & self.alive) <= set(self._commands[key]):
+                        self._changed.clear()
+                        await self._changed.wait()
+        finally:
+            self._window = None
         return self._commands.pop(key, {}), time.monotonic() - started
 
     def _reach(self, sender_role: str, receiver_role: str, distance_m: float) -> bool:
@@ -236,6 +249,7 @@ class WorldRunner:
         controlled = self.task.uav_ids
         while not ep.done:
             round_started = time.monotonic()
+            refused_before = self.refusals()
             rnd = ep.round
             self._where = (episode, rnd)
             present = [u for u in controlled if u in self.alive]
@@ -271,7 +285,7 @@ class WorldRunner:
             for uav, cmd in commands.items():
                 if uav not in orders:
                     continue
-                orders[uav] = None if cmd.held else cmd.vel
+                orders[uav] = None if cmd.held else self.check.bound(world, uav, cmd.vel)
                 if cmd.guess is not None:
                     guesses[uav] = cmd.guess
                 for ref in cmd.sent:
@@ -313,11 +327,28 @@ class WorldRunner:
                         wall_s=time.monotonic() - round_started,
                         bodies=tuple(b.as_entity() for b in world.bodies()),
                         entities=tuple(world.entities()),
+                        refused=dict(self.refusals() - refused_before),
                     )
                 )
         result = ep.result()
         self._publish_episode(episode, "end", result.reason)
         return result
+
+    def refusals(self) -> Counter[str]:
+        """Everything the world side refused so far, by cause: commands (command check),
+        payloads (decoding, signatures), listeners' messages, tokens of unknown ids."""
+        out: Counter[str] = Counter(self.check.refused)
+        out.update(self.mesh.codec.stats.rejected)
+        for link in self._listeners.values():
+            out.update({k: v for k, v in link.stats.rejected.items() if k not in RADIO_DROPS})
+        if self.stats.unknown_tokens:
+            out["unknown_token"] += self.stats.unknown_tokens
+        return out
+
+    @property
+    def missing_messages(self) -> int:
+        """Expected messages the world's listeners never got."""
+        return sum(link.stats.missing for link in self._listeners.values())
 
     def shutdown(self) -> None:
         """Tell every daemon the run is over (they leave their round loop and exit)."""

@@ -5,16 +5,24 @@ The world sends each UAV its frozen perception (the round trigger, what it sense
 private facts); the UAV answers with one gated velocity setpoint, the list of peer messages
 it sent (so the world can tell each recipient what to wait for next round) and its guess,
 if a skill recorded one. A UAV that misses the world's deadline holds.
+
+Only the world speaks for the world: perception, rewards and episode events count only if
+their header names the world identity (authentic when the mesh verifies signatures) and
+they are for this UAV; a perception must be newer than the last one taken (one is kept
+pending, the newest: a flood cannot queue up), and a reward only counts once, for a round
+this UAV was sent a perception for and has not played past. Refusals are counted by cause
+in ``rejected``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
+from collections import Counter
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.observation import VehicleState
 from aeroweaver_edge.ports import Health, Percept, RewardEvent, RoundTick
 from aeroweaver_edge.wire import (
@@ -32,6 +40,7 @@ if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh, Subscription
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
+WORLD = "world"  # the simulated world's identity (security.identity.WORLD)
 
 
 class SimLink:
@@ -45,10 +54,16 @@ class SimLink:
         self.uav = uav
         self._headers = headers
         self._reward_wait_s = reward_wait_s
-        self._ticks: asyncio.Queue[SimPerception | None] = asyncio.Queue()
+        # The newest perception not yet taken (None: none), and whether the run is over.
+        self._next: SimPerception | None = None
+        self._over = False
+        self._tick_ready = asyncio.Event()
+        self._taken: tuple[int, int] = (-1, -1)  # (episode, round) of the newest perception
+        self.rejected: Counter[str] = Counter()
+        self.superseded = 0  # perceptions replaced by a newer one before the daemon took them
         self._rewards: list[RewardEvent] = []
         self._reward_seen: set[tuple[int, int]] = set()
-        self._reward_cond = asyncio.Condition()
+        self._reward_arrived = asyncio.Event()
         self._current: SimPerception | None = None
         self._last_played: tuple[int, int] | None = None
         self._setpoint: Vec3 = ZERO
@@ -58,52 +73,96 @@ class SimLink:
         # level either way (take-off happens before the first round), so returns are as before.
         self.armed = False
         self.in_air = False
-        self._tasks: list[asyncio.Task[None]] = []
+        self._subs: list[Subscription[Any]] = []
 
     async def start(self) -> None:
-        per = self._mesh.subscribe(self._keys.sim_perception(self.uav), SimPerception)
-        rew = self._mesh.subscribe(self._keys.sim_reward(self.uav), SimReward)
-        epi = self._mesh.subscribe(self._keys.sim_episode, SimEpisode)
-        self._tasks = [
-            asyncio.create_task(self._pump_perception(per), name=f"{self.uav}-sim-perception"),
-            asyncio.create_task(self._pump_rewards(rew), name=f"{self.uav}-sim-rewards"),
-            asyncio.create_task(self._pump_episodes(epi), name=f"{self.uav}-sim-episodes"),
+        keys, mesh = self._keys, self._mesh
+        self._subs = [
+            mesh.subscribe(keys.sim_perception(self.uav), SimPerception, on_item=self._on),
+            mesh.subscribe(keys.sim_reward(self.uav), SimReward, on_item=self._on),
+            mesh.subscribe(keys.sim_episode, SimEpisode, on_item=self._on),
         ]
 
     async def aclose(self) -> None:
-        await cancel_all(self._tasks)
+        subs, self._subs = self._subs, []
+        for sub in subs:
+            await sub.aclose()
 
-    async def _pump_perception(self, sub: Subscription[SimPerception]) -> None:
-        async for _key, msg in sub:
-            if msg.uav == self.uav:
-                await self._ticks.put(msg)
+    def _on(self, item: tuple[str, SimPerception | SimReward | SimEpisode]) -> None:
+        msg = item[1]
+        if isinstance(msg, SimPerception):
+            why = self.on_perception(msg)
+        elif isinstance(msg, SimReward):
+            why = self.on_reward(msg)
+        else:
+            why = self.on_episode(msg)
+        if why is not None:
+            self.rejected[why] += 1
 
-    async def _pump_rewards(self, sub: Subscription[SimReward]) -> None:
-        async for _key, msg in sub:
-            if msg.uav != self.uav or (msg.episode, msg.round) in self._reward_seen:
-                continue
-            async with self._reward_cond:
-                self._reward_seen.add((msg.episode, msg.round))
-                self._rewards.append(
-                    RewardEvent(msg.episode, msg.round, msg.reward, msg.done, "sim")
-                )
-                self._reward_cond.notify_all()
+    def on_perception(self, msg: SimPerception) -> str | None:
+        """Take a perception as the next round's, or say why not."""
+        where = (msg.episode, msg.round)
+        if msg.h.sender != WORLD:
+            return "perception_not_world"
+        if msg.uav != self.uav:
+            return "perception_wrong_uav"
+        if where <= self._taken:
+            return "perception_stale"
+        if not all(math.isfinite(x) for x in (*msg.pos, *msg.vel, msg.deadline_s)):
+            return "perception_non_finite"
+        self.superseded += self._next is not None  # the daemon fell behind
+        self._taken, self._next = where, msg
+        self._tick_ready.set()
+        return None
 
-    async def _pump_episodes(self, sub: Subscription[SimEpisode]) -> None:
-        async for _key, msg in sub:
-            if msg.phase == "shutdown":
-                await self._ticks.put(None)
+    def _reward_round(self, where: tuple[int, int]) -> bool:
+        """A reward counts for a round this UAV was sent a perception for, from the one it
+        played last on (a late daemon still gets the rewards of rounds it is behind on)."""
+        return (self._last_played or (-1, -1)) <= where <= self._taken
+
+    def on_reward(self, msg: SimReward) -> str | None:
+        """Take a reward, or say why not."""
+        where = (msg.episode, msg.round)
+        if msg.h.sender != WORLD:
+            return "reward_not_world"
+        if msg.uav != self.uav:
+            return "reward_wrong_uav"
+        if where in self._reward_seen:
+            return "reward_duplicate"
+        if not self._reward_round(where):
+            return "reward_not_current"
+        if not math.isfinite(msg.reward):
+            return "reward_non_finite"
+        self._reward_seen.add(where)
+        if len(self._reward_seen) > 8:  # only these rounds can still count
+            self._reward_seen = {k for k in self._reward_seen if self._reward_round(k)}
+        self._rewards.append(RewardEvent(msg.episode, msg.round, msg.reward, msg.done, "sim"))
+        self._reward_arrived.set()
+        return None
+
+    def on_episode(self, msg: SimEpisode) -> str | None:
+        """The world's episode events; only its shutdown ends the run here."""
+        if msg.h.sender != WORLD:
+            return "episode_not_world"
+        if msg.phase == "shutdown":
+            self._over = True
+            self._tick_ready.set()
+        return None
 
     async def _await_reward(self, key: tuple[int, int]) -> None:
         """Lockstep: a round's reward reaches the agent before its next round starts."""
-        async with self._reward_cond:
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(self._reward_wait_s):
-                    await self._reward_cond.wait_for(lambda: key in self._reward_seen)
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(self._reward_wait_s):
+                while key not in self._reward_seen:
+                    self._reward_arrived.clear()
+                    await self._reward_arrived.wait()
 
     # Clock
     async def next_round(self) -> RoundTick | None:
-        msg = await self._ticks.get()
+        while self._next is None and not self._over:
+            self._tick_ready.clear()
+            await self._tick_ready.wait()
+        msg, self._next = self._next, None
         if self._last_played is not None:
             await self._await_reward(self._last_played)
         if msg is None:

@@ -31,6 +31,7 @@ SUMMARY_KEYS = {
     "episodes",
     "holds",
     "deadline_misses",
+    "security",
 }
 UAVS = ["uav0", "uav1", "uav2"]
 
@@ -125,19 +126,9 @@ def _aeroweaver() -> list[str]:
     return [found] if found else [sys.executable, "-m", "aeroweaver_edge.cli"]
 
 
-def test_cli_sim_writes_the_json_summary(tmp_path: Path) -> None:
-    out = tmp_path / "runs" / "coverage.json"
+def _cli_sim(tmp_path: Path, out: Path, *extra: str) -> dict[str, Any]:
     proc = subprocess.run(
-        [
-            *_aeroweaver(),
-            "sim",
-            "coverage",
-            "--selector",
-            "scripted",
-            "--quiet",
-            "--json",
-            str(out),
-        ],
+        [*_aeroweaver(), "sim", "coverage", "--selector", "scripted", "--json", str(out), *extra],
         capture_output=True,
         text=True,
         timeout=90,
@@ -146,5 +137,18 @@ def test_cli_sim_writes_the_json_summary(tmp_path: Path) -> None:
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert f"summary written to {out}" in proc.stdout
-    data = json.loads(out.read_text(encoding="utf-8"))
+    data: dict[str, Any] = json.loads(out.read_text(encoding="utf-8"))
     check_summary(data)
+    return data
+
+
+def test_cli_sim_writes_the_json_summary(tmp_path: Path) -> None:
+    """Secured by default; ``--insecure`` flies the very same returns without security."""
+    secured = _cli_sim(tmp_path, tmp_path / "runs" / "coverage.json", "--quiet")
+    sec = secured["security"]
+    assert (sec["tls"], sec["mtls"], sec["acl"], sec["signed"]) == (True, True, True, True)
+    assert (sec["rejected_total"], sec["missing_messages"], sec["refused_commands"]) == (0, 0, {})
+    plain = _cli_sim(tmp_path, tmp_path / "plain.json", "--quiet", "--insecure")
+    assert not any(plain["security"][k] for k in ("tls", "mtls", "acl", "signed"))
+    assert plain["agent_returns"] == secured["agent_returns"]
+    assert plain["rounds"] == secured["rounds"]

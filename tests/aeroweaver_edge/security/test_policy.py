@@ -50,7 +50,15 @@ def test_uav_rules_name_only_its_own_keys() -> None:
     assert rules["in-serve"]["key_exprs"] == ["aw/s/uav/uav1/**"]
     reads = rules["in-read"]["key_exprs"]
     assert "aw/s/sim/perception/uav1" in reads
+    assert "aw/s/uav/*/broadcast" in reads  # every peer's broadcast key
     assert not [k for k in reads if "uav2" in k or "uav0" in k]
+
+
+def test_world_hears_the_radio_its_listeners_hear_and_writes_only_sim() -> None:
+    rules = _rules(build_acl("s", MEMBERS), "world")
+    assert rules["in-write"]["key_exprs"] == ["aw/s/sim/**"]
+    reads = rules["in-read"]["key_exprs"]
+    assert {"aw/s/uav/*/broadcast", "aw/s/uav/*/inbox/*", "aw/s/uav/*/sim/command"} <= set(reads)
 
 
 def test_namespace_prefixes_every_rule() -> None:

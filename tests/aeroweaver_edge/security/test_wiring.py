@@ -69,3 +69,34 @@ def test_config_helpers_check_their_input(tmp_path: Path) -> None:
     assert limits.max_abs_m is not None
     assert 99.0 < limits.max_abs_m < 200.0
     assert peer_limits(None, SafetyConfig(), 0.5).known_peers is None
+
+
+async def test_a_secured_daemon_runs_on_its_boot_counter_and_the_identity_list(
+    tmp_path: Path,
+) -> None:
+    """What app.py wires for ``aeroweaver daemon`` with [mesh.security]: the header epoch is
+    the persisted boot counter, only the swarm's UAVs may join the roster, beacons are held
+    to the envelope, and the Commander's authority is its live token."""
+    from aeroweaver_edge.app import run_daemon
+    from aeroweaver_edge.config import AgentConfig, UavConfig
+    from aeroweaver_edge.daemon import UavDaemon
+
+    pki = ephemeral_swarm(tmp_path / "pki", "sim", ["uav0", "uav1"])
+    cfg = mesh_configs(pki, ["uav0"], port=free_port(), seed="uav0")["uav0"]
+    uav = UavConfig(uav="uav0", swarm="sim", mesh=cfg,
+                    agent=AgentConfig(selector="scripted", beta=0.0))  # fmt: skip
+    for start in (1, 2):  # a restart is the next epoch, whatever the clock says
+        ready: asyncio.Future[UavDaemon] = asyncio.get_running_loop().create_future()
+        task = asyncio.create_task(run_daemon(uav, on_ready=ready.set_result))
+        try:
+            d = await asyncio.wait_for(ready, 30.0)
+            assert d.headers.epoch == start
+            assert d.mission.track_commander
+            link = d._peer_link
+            assert link is not None
+            assert link.limits.known_peers == frozenset({"uav0", "uav1"})
+            assert link.limits.max_speed_mps == SafetyConfig().max_speed_mps
+            assert d.mesh.authenticated
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
