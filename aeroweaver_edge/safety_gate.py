@@ -112,17 +112,34 @@ class SafetyGate:
             # From outside the envelope the way back can be longer than one horizon allows.
             vel = self._cap(vel, notes)
 
-        # Never close in on a neighbour that is already, or would become, too near.
+        # Never close in below the minimum separation, even when the neighbour closes in too.
+        # Each UAV may close on a neighbour by at most half the gap beyond the minimum within
+        # one horizon (a reciprocal half-plane): two gated UAVs that fly at each other in the
+        # same round still end it at least the minimum apart, and a neighbour that does not
+        # move is kept at (gap + minimum) / 2. A faster approach is slowed along its own
+        # direction (which keeps the fence and the cap); with no gap left to close: hold.
         sep = self.cfg.min_separation_m
         if sep > 0:
-            nxt = tuple(p + v * self.horizon_s for p, v in zip(pos, vel, strict=True))
+            scale, tightest = 1.0, math.inf
             for other in neighbours:
                 if not _finite(other):
                     continue
-                now_d = math.dist(pos, other)
-                next_d = math.dist(nxt, other)
-                if next_d < sep and next_d < now_d:
-                    return GatedCommand(
-                        ZERO, True, (*notes, f"separation {next_d:.1f} m < {sep} m")
-                    )
+                gap = math.dist(pos, other)
+                if gap < 1e-9:
+                    continue  # on top of it: every direction opens the gap
+                closing = (
+                    sum(v * (o - p) for v, o, p in zip(vel, other, pos, strict=True))
+                    / gap
+                    * self.horizon_s
+                )
+                allowed = max(0.0, (gap - sep) / 2)
+                if closing > allowed and allowed / closing < scale:
+                    scale, tightest = allowed / closing, gap
+            if scale <= 0.0:
+                return GatedCommand(
+                    ZERO, True, (*notes, f"separation: {tightest:.1f} m, minimum {sep} m")
+                )
+            if scale < 1.0:
+                vel = (vel[0] * scale, vel[1] * scale, vel[2] * scale)
+                notes.append(f"slowed for separation ({tightest:.1f} m, minimum {sep} m)")
         return GatedCommand(vel, held=False, violations=tuple(notes))

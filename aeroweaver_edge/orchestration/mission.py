@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aeroweaver_edge import defaults as d
-from aeroweaver_edge.config import LLMConfig, MeshConfig, SimConfig
+from aeroweaver_edge.config import LLMConfig, MeshConfig, SafetyConfig, SimConfig
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.orchestration.swarm import world_task
@@ -41,6 +41,7 @@ class MissionStartOptions:
     episodes: int = 1
     max_rounds: int = d.MAX_ROUNDS
     deadline_s: float = d.DEADLINE_S
+    safety: SafetyConfig = field(default_factory=SafetyConfig)  # the envelope the world checks
 
 
 async def start_mission(
@@ -78,7 +79,7 @@ async def start_mission(
                     if on_round is not None:
                         await on_round(log, commander.board)
 
-                runner = WorldRunner(mesh, opts.swarm, task, cfg, on_round=hook)
+                runner = WorldRunner(mesh, opts.swarm, task, cfg, on_round=hook, safety=opts.safety)
                 await runner.start()
                 stack.push_async_callback(runner.aclose)
                 await runner.wait_alive(plan.participants, 10.0)
@@ -90,6 +91,7 @@ async def start_mission(
                          "agent_returns": {u: res.returns[u] for u in task.uav_ids},
                          "scripted_returns": {b: res.returns[b] for b in task.scripted_ids}}
                     )  # fmt: skip
+                out["envelope_violations"] = runner.envelope.summary()
                 out["ended"] = (
                     "complete"
                     if all(e["reason"] == "complete" for e in out["episodes"])

@@ -25,7 +25,14 @@ from typing import Any, Literal
 
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.agent.memory import new_run_id
-from aeroweaver_edge.config import AgentConfig, LLMConfig, MeshConfig, SimConfig, UavConfig
+from aeroweaver_edge.config import (
+    AgentConfig,
+    LLMConfig,
+    MeshConfig,
+    SafetyConfig,
+    SimConfig,
+    UavConfig,
+)
 from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
@@ -63,6 +70,7 @@ class SwarmOptions:
     measure_rss: bool = False  # read every daemon process's peak RSS before it exits
     link: Literal["sim", "mavlink", "mavsdk"] = "sim"  # flight: real MAVLink to emulated autopilots
     personality: str = "px4"  # the emulated autopilots' (with a mavlink/mavsdk link)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)  # the daemons'; the world checks it
 
 
 @dataclass
@@ -101,6 +109,7 @@ class RunSummary:
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
     link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
+    envelope_violations: dict[str, Any] = field(default_factory=dict)  # sim/envelope.py
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -142,6 +151,7 @@ class RunSummary:
             "setup_tokens": self.setup_tokens,
             "mission": self.mission,
             "llm_calls": self.llm_calls,
+            "envelope_violations": self.envelope_violations,
             "llm_classes": self.llm_classes,
             "run_id": self.run_id,
             "wall_s": round(self.wall_s, 3),
@@ -299,7 +309,7 @@ async def run_swarm(
             )
         runner = WorldRunner(
             world_mesh, opts.swarm, task, sim_cfg, on_round=round_hook,
-            vehicles=linked.bridge if linked else None,
+            vehicles=linked.bridge if linked else None, safety=opts.safety,
         )  # fmt: skip
         await runner.start()
         stack.push_async_callback(runner.aclose)
@@ -323,6 +333,7 @@ async def run_swarm(
                     run_id=summary.run_id,
                     share_experience=opts.share_experience,
                 ),
+                safety=opts.safety,
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
             for u in uavs
@@ -387,6 +398,7 @@ async def run_swarm(
             + sum((p.last.decode_errors if p.last else 0) for p in board.uavs.values())
         )
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
+        summary.envelope_violations = runner.envelope.summary()
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
         summary.tokens = {"prompt": prompt, "completion": completion, "total": prompt + completion}

@@ -27,10 +27,11 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from aeroweaver_edge.config import SimConfig
+from aeroweaver_edge.config import SafetyConfig, SimConfig
 from aeroweaver_edge.defaults import COMM_RADIUS_M
 from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.lifecycle import cancel_all
+from aeroweaver_edge.sim.envelope import EnvelopeCheck, Violation
 from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
 from aeroweaver_edge.tasks.base import TaskDefinition
 from aeroweaver_edge.wire import (
@@ -66,6 +67,7 @@ class RoundLog:
     wait_s: float
     deliveries: int = 0  # (message, recipient) pairs that reach, of this round's messages
     wall_s: float = 0.0  # the whole round in the world: perceptions to rewards
+    violations: tuple[Violation, ...] = ()  # envelope violations among the applied commands
 
 
 @dataclass
@@ -87,8 +89,12 @@ class WorldRunner:
         on_round: Callable[[RoundLog], Awaitable[None]] | None = None,
         comm_radius_m: float = COMM_RADIUS_M,
         vehicles: EmulatorBridge | None = None,
+        safety: SafetyConfig | None = None,
     ) -> None:
         self.mesh = mesh
+        # The envelope invariant: every applied command is judged against the daemons'
+        # envelope (default: the default one), independently of their safety gates.
+        self.envelope = EnvelopeCheck(safety or SafetyConfig(), horizon_s=cfg.round_s)
         self.comm_radius_m = comm_radius_m
         # flight link (sim --link mavlink|mavsdk): emulated autopilots fly the bodies
         self.vehicles = vehicles
@@ -238,8 +244,11 @@ class WorldRunner:
                 if uav not in self.alive:
                     world.mark_absent(uav)
             scripted = ep.scripted(await self._hear(rnd, world, expect))
+            told: dict[str, list[str]] = {}  # the UAVs each one perceives
             for uav in present:
                 body = world.body(uav)
+                seen = self.task.visible(world, uav)
+                told[uav] = [e.id for e in seen if e.kind == "uav"]
                 self.mesh.put(
                     self.keys.sim_perception(uav),
                     SimPerception(
@@ -250,7 +259,7 @@ class WorldRunner:
                         deadline_s=self.cfg.deadline_s,
                         pos=body.pos,
                         vel=body.vel,
-                        entities=self.task.visible(world, uav),
+                        entities=seen,
                         expected_inbox=expect.get(uav, []),
                         facts=self.task.private_facts(world, uav),
                     ),
@@ -276,6 +285,9 @@ class WorldRunner:
                 # flight link: the bodies move as the autopilots were told over MAVLink; wait
                 # until each declared setpoint has arrived, then hold only the silent UAVs.
                 orders = await self.vehicles.settle(commands, controlled)
+            violations = self.envelope.check_round(
+                episode, rnd, {b.id: b.pos for b in world.bodies()}, orders, told
+            )
             ep.apply_actions(scripted)
             ep.apply(orders, guesses)
             res = ep.advance()
@@ -306,6 +318,7 @@ class WorldRunner:
                         wait_s=waited,
                         deliveries=sum(len(v) for v in expect.values()),
                         wall_s=time.monotonic() - round_started,
+                        violations=tuple(violations),
                     )
                 )
         result = ep.result()
