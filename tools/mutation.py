@@ -198,12 +198,15 @@ BYPASS = b"""    _m = intent.motion  # MUTANT: the gate is wired around; the raw
     else:
         gated = GatedCommand(ZERO, True)
 """
-MANDATORY: tuple[tuple[str, str, str, bytes, bytes], ...] = (
+MANDATORY: tuple[tuple[str, str, str, bytes | tuple[bytes, ...], bytes], ...] = (
     (
         "decision_round",
         "aeroweaver_edge/decision_round.py",
         "gate bypassed: the executor's raw intent reaches the vehicle",
-        b"    gated = rc.gate.gate(intent.motion, own.pos, neighbours)\n",
+        (  # the call as it reads now, and as it read on main before issue 12
+            b"    gated = rc.gate.gate(intent.motion, own.pos, neighbours, others)\n",
+            b"    gated = rc.gate.gate(intent.motion, own.pos, neighbours)\n",
+        ),
         BYPASS,
     ),
     (
@@ -393,7 +396,8 @@ def mandatory(root: Path, target: Target) -> list[Mutant]:
         if name != target.name:
             continue
         src = (root / rel).read_bytes()
-        at = src.find(old)
+        found = [(src.find(o), o) for o in ((old,) if isinstance(old, bytes) else old)]
+        at, old = max(found)
         if at < 0:
             raise SystemExit(f"mutation: mandatory mutant '{why}' no longer matches {rel}")
         line = src.count(b"\n", 0, at) + 1

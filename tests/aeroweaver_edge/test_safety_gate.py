@@ -184,6 +184,17 @@ def test_separation_hold_when_no_spare_gap_is_left() -> None:
     assert (sideways.held, sideways.vel) == (False, (0.0, 4.0, 0.0))  # not closing in
 
 
+def test_a_body_that_runs_no_gate_may_be_approached_to_the_minimum() -> None:
+    """An evader the world flies keeps no half of the gap: the pursuer may use all of it."""
+    evader: Vec3 = (6.0, 0.0, -5.0)
+    out = GATE.gate(SetVelocity((11.0, 0.0, 0.0)), HOME, others=[evader])
+    assert out.vel == pytest.approx((8.0, 0.0, 0.0))  # (6 - 2) m in 0.5 s
+    assert math.dist(ahead(HOME, out.vel), evader) == pytest.approx(2.0)
+    as_peer = GATE.gate(SetVelocity((11.0, 0.0, 0.0)), HOME, neighbours=[evader])
+    assert as_peer.vel == pytest.approx((4.0, 0.0, 0.0))  # a gated peer: half of it
+    assert_hold(GATE.gate(SetVelocity((1.0, 0.0, 0.0)), HOME, others=[(2.0, 0.0, -5.0)]))
+
+
 def test_two_uavs_flying_at_each_other_end_the_round_apart() -> None:
     """Each judges only the other's last known position, yet the pair keeps the minimum:
     the old rule let both take the full step and meet (0.4 m in a swarm test)."""

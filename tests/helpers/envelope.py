@@ -56,7 +56,11 @@ def raw_velocity(motion: Motion, pos: Vec3, horizon_s: float) -> Vec3 | None:
 
 
 def pass_through(
-    self: SafetyGate, motion: Motion, pos: Vec3, neighbours: Sequence[Vec3] = ()
+    self: SafetyGate,
+    motion: Motion,
+    pos: Vec3,
+    neighbours: Sequence[Vec3] = (),
+    others: Sequence[Vec3] = (),
 ) -> GatedCommand:
     """``SafetyGate.gate`` with every check removed (monkeypatch it over the class)."""
     vel = raw_velocity(motion, pos, self.horizon_s)

@@ -7,7 +7,6 @@ and logprobs differ across backends and cache states (notes/llm.md).
 from __future__ import annotations
 
 import importlib.metadata
-import importlib.util
 import math
 import sys
 import time
@@ -24,16 +23,6 @@ from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable, sh
 from aeroweaver_edge.llm.probe import PROBE_LABELS, probe_endpoint
 from aeroweaver_edge.observation import Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
-
-HAS_RUNTIME = importlib.util.find_spec("xllamacpp") is not None
-
-
-def _model_missing() -> str | None:
-    try:
-        embedded.check_available()
-    except EmbeddedUnavailable as exc:
-        return str(exc)
-    return None
 
 
 def test_missing_model_package_says_how_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -59,7 +48,7 @@ def test_base_url_needs_a_running_server() -> None:
     server.close()  # idempotent, harmless
 
 
-@pytest.mark.skipif(not HAS_RUNTIME, reason="xllamacpp not installed")
+@pytest.mark.embedded
 def test_unloadable_model_is_reported(tmp_path: Path) -> None:
     bad = tmp_path / "broken.gguf"
     bad.write_bytes(b"not a gguf")
@@ -85,9 +74,6 @@ def _small_request() -> DecisionRequest:
 
 @pytest.mark.embedded
 async def test_embedded_smoke_structure_only() -> None:
-    reason = _model_missing()
-    if reason is not None:
-        pytest.skip(reason)
     started = time.perf_counter()
     async with shared_server() as server, shared_server() as same:
         assert same is server  # one model load for every daemon of the process

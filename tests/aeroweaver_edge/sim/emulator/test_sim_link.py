@@ -3,8 +3,6 @@ emulated autopilots gives the returns of the in-process link (scripted selector)
 
 from __future__ import annotations
 
-import importlib.util
-
 import pytest
 
 from aeroweaver_edge.orchestration.swarm import RunSummary, SwarmOptions, run_swarm
@@ -48,7 +46,7 @@ async def test_mavlink_link_matches_the_sim_link(
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(importlib.util.find_spec("mavsdk") is None, reason="extra [mavsdk] absent")
+@pytest.mark.mavsdk
 async def test_mavsdk_link_matches_the_sim_link(reference: dict[str, object]) -> None:
     got = (await run("mavsdk")).as_dict()
     assert_same_returns(reference, got)
