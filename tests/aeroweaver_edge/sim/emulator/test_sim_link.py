@@ -37,6 +37,7 @@ async def test_mavlink_link_matches_the_sim_link(
     assert_same_returns(reference, got)
     link = got["link"]
     assert link["settle_mismatches"] == 0  # every declared setpoint arrived over MAVLink
+    assert got["envelope_violations"]["total"] == 0  # what the autopilots flew, judged
     for uav, v in link["vehicles"].items():
         # each daemon went through the flight phases on its autopilot
         assert v["commands"]["COMPONENT_ARM_DISARM"] == 1, uav
