@@ -4,6 +4,7 @@ through, e.g. an ``--insecure`` swarm or a compromised relay)."""
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 from aeroweaver_edge.mesh import Mesh
@@ -80,9 +81,13 @@ async def test_restart_after_leaving_is_accepted_and_old_epoch_refused(zenoh_net
     b.publish_beacon(1, HERE, STILL)  # again, now that a2 listens
     assert await eventually(lambda: "b" in a2.neighbours, 5.0)
     mallory.put(KEYS.inbox("b", "a"), msg("a", 1, 999), block=True)  # the old epoch, replayed
+    # b waits for the restarted a's message with the same seq as a's first one, before it
+    # is sent: that old arrival must not count (b forgot it when a's session ended).
+    waiting = asyncio.create_task(b.collect_inbox([ref], timeout_s=3.0))
+    await asyncio.sleep(0)
     ref2 = await a2.send("b", "status", {"again": True}, round=1)
-    assert ref2 is not None
-    got = await b.collect_inbox([ref2], timeout_s=3.0)  # same seq as a's first message
+    assert ref2 == ref
+    got = await waiting
     assert [m.body for m in got] == [{"again": True}]
     await settled(b, 3)
     assert b.stats.rejected == {"old_epoch": 1}

@@ -232,10 +232,16 @@ def test_collection_completes_when_the_last_treasure_is_delivered() -> None:
         collector.north, collector.east = task.treasure_pos[tid]
         picked = ep.advance()
         assert task.cargo[collector.id] == colour
+        assert (task.picked, picked.metrics["picked"], picked.metrics["carrying"]) == (
+            k + 1,
+            k + 1,
+            1,
+        )
         assert not picked.complete
         collector.north, collector.east = deposits[colour]
         delivered = ep.advance()
-        assert task.delivered == k + 1
+        assert task.delivered == delivered.metrics["delivered"] == k + 1
+        assert task.cargo[collector.id] == ""
         assert delivered.complete == (k + 1 == n)
         assert delivered.done == (k + 1 == n)
     assert ep.result().reason == "complete"
