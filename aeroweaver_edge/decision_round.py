@@ -127,6 +127,17 @@ def _execute(
         return None
 
 
+def _split_peers(task: str, obs: Observation) -> tuple[list[Vec3], list[Vec3]]:
+    """(UAVs that run this gate too, bodies the world flies): the task's scripted roles
+    run no gate of ours, so the safety gate must not count on them keeping their half of a
+    gap. A task the registry does not know (a field mission): every peer is gated."""
+    from aeroweaver_edge.tasks import TASK_NAMES, get_spec
+
+    flown = set(get_spec(task).scripted_names) if task in TASK_NAMES else set()
+    peers = obs.peers()
+    return [e.pos for e in peers if e.role not in flown], [e.pos for e in peers if e.role in flown]
+
+
 async def _apply(rc: RoundContext, gated: GatedCommand) -> None:
     if gated.held:
         await rc.vehicle.hold()
@@ -270,8 +281,8 @@ async def _decide_and_act(
     # 5. Gate and execute on this UAV's own vehicle only.
     executed = _execute(rc, cand.skill, cs, choice, obs, ctx)
     intent = HOLD if executed is None else executed
-    neighbours = [e.pos for e in obs.peers()]
-    gated = rc.gate.gate(intent.motion, own.pos, neighbours)
+    neighbours, others = _split_peers(view.task, obs)
+    gated = rc.gate.gate(intent.motion, own.pos, neighbours, others)
     await _apply(rc, gated)
     if intent.action is not None:  # flight: a vehicle action, after the phases' approval
         refused = await rc.act(intent.action) if rc.act else "vehicle actions are not wired"

@@ -57,7 +57,53 @@ class SafetyGate:
                 notes.append("speed capped")
         return vel
 
-    def gate(self, motion: Motion, pos: Vec3, neighbours: Sequence[Vec3] = ()) -> GatedCommand:
+    def _closing(self, vel: Vec3, u: Vec3) -> float:
+        """Metres this velocity closes in along ``u`` within one horizon."""
+        return (vel[0] * u[0] + vel[1] * u[1] + vel[2] * u[2]) * self.horizon_s
+
+    def _separation_limits(
+        self, pos: Vec3, neighbours: Sequence[Vec3], others: Sequence[Vec3]
+    ) -> list[tuple[Vec3, float, float]]:
+        """(unit vector toward the body, metres we may close in on it, gap) per body."""
+        sep = self.cfg.min_separation_m
+        out: list[tuple[Vec3, float, float]] = []
+        if sep <= 0:
+            return out
+        for bodies, share in ((neighbours, 2.0), (others, 1.0)):
+            for other in bodies:
+                if not _finite(other):
+                    continue
+                gap = math.dist(pos, other)
+                if gap < 1e-9:
+                    continue  # on top of it: every direction opens the gap
+                u = (
+                    (other[0] - pos[0]) / gap,
+                    (other[1] - pos[1]) / gap,
+                    (other[2] - pos[2]) / gap,
+                )
+                out.append((u, max(0.0, (gap - sep) / share), gap))
+        return out
+
+    def _fits(self, pos: Vec3, vel: Vec3, limits: list[tuple[Vec3, float, float]]) -> bool:
+        """Inside the cap, the envelope one horizon ahead and every separation limit."""
+        h = self.horizon_s
+        ahead = (pos[0] + vel[0] * h, pos[1] + vel[1] * h, pos[2] + vel[2] * h)
+        inside = self._inside(ahead)
+        return (
+            math.hypot(*vel) <= self.cfg.max_speed_mps * (1 + 1e-12)
+            and math.dist(inside, ahead) <= 1e-9
+            and all(self._closing(vel, u) <= a + 1e-9 for u, a, _gap in limits)
+        )
+
+    def gate(
+        self,
+        motion: Motion,
+        pos: Vec3,
+        neighbours: Sequence[Vec3] = (),
+        others: Sequence[Vec3] = (),
+    ) -> GatedCommand:
+        """``neighbours``: last known positions of UAVs that run this gate too (they share
+        every gap); ``others``: of bodies that do not (world-flown opponents)."""
         if isinstance(motion, Hold):
             return GatedCommand(ZERO, held=True)
         if not _finite(pos):
@@ -112,17 +158,31 @@ class SafetyGate:
             # From outside the envelope the way back can be longer than one horizon allows.
             vel = self._cap(vel, notes)
 
-        # Never close in on a neighbour that is already, or would become, too near.
-        sep = self.cfg.min_separation_m
-        if sep > 0:
-            nxt = tuple(p + v * self.horizon_s for p, v in zip(pos, vel, strict=True))
-            for other in neighbours:
-                if not _finite(other):
-                    continue
-                now_d = math.dist(pos, other)
-                next_d = math.dist(nxt, other)
-                if next_d < sep and next_d < now_d:
-                    return GatedCommand(
-                        ZERO, True, (*notes, f"separation {next_d:.1f} m < {sep} m")
-                    )
+        # Never close in below the minimum separation, even when the neighbour closes in too.
+        # A UAV may close on a gated neighbour by at most half the gap beyond the minimum
+        # within one horizon (a reciprocal half-plane: two gated UAVs that fly at each other
+        # in the same round still end it at least the minimum apart); on a body that runs no
+        # gate of ours, by the whole spare gap. Only the excess approach is taken away (the
+        # UAV slides past); where sliding would break another limit it is slowed along its
+        # own direction instead (which keeps the fence and the cap); nothing left: hold.
+        limits = self._separation_limits(pos, neighbours, others)
+        over = [lim for lim in limits if self._closing(vel, lim[0]) > lim[1]]
+        if over:
+            tightest = min(gap for _u, _a, gap in over)
+            why = f"{tightest:.1f} m, minimum {self.cfg.min_separation_m} m"
+            slid = vel
+            for u, allowed, _gap in limits:
+                excess = self._closing(slid, u) - allowed
+                if excess > 0:
+                    k = excess / self.horizon_s
+                    slid = (slid[0] - k * u[0], slid[1] - k * u[1], slid[2] - k * u[2])
+            if self._fits(pos, slid, limits):
+                vel = slid
+                notes.append(f"slid past for separation ({why})")
+            else:
+                scale = min(allowed / self._closing(vel, u) for u, allowed, _gap in over)
+                vel = (vel[0] * scale, vel[1] * scale, vel[2] * scale)
+                notes.append(f"slowed for separation ({why})")
+            if math.hypot(*vel) < 1e-9:
+                return GatedCommand(ZERO, True, (*notes[:-1], f"separation: {why}"))
         return GatedCommand(vel, held=False, violations=tuple(notes))

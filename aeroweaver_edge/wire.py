@@ -10,6 +10,7 @@ and return ``None``.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -396,12 +397,26 @@ class Codec:
         return msg
 
 
+_epoch_lock = threading.Lock()
+_last_epoch = 0
+
+
+def boot_epoch() -> int:
+    """A default boot epoch: wall-clock nanoseconds, made strictly increasing within the
+    process (two factories never share one, even on a coarse clock) and, as time goes on,
+    across restarts. A persisted boot counter (``security.wiring``) is the stronger kind."""
+    global _last_epoch
+    with _epoch_lock:
+        _last_epoch = max(time.time_ns(), _last_epoch + 1)
+        return _last_epoch
+
+
 class HeaderFactory:
     """Stamps outgoing payloads with sender, boot epoch and a strictly increasing sequence."""
 
     def __init__(self, sender: str, epoch: int | None = None) -> None:
         self.sender = sender
-        self.epoch = epoch if epoch is not None else time.time_ns()
+        self.epoch = epoch if epoch is not None else boot_epoch()
         self._seq = 0
 
     def next(self, ttl_s: float = 10.0) -> Header:

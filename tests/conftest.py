@@ -1,12 +1,67 @@
-"""Shared fixtures for the whole test tree."""
+"""Shared fixtures and checks for the whole test tree.
+
+Every test runs in an empty working directory of its session (``_elsewhere``), so none can
+depend on being started from the repository root.
+
+Requirements (``tests/helpers/requirements.py``): a test marked ``embedded`` or ``mavsdk``
+fails when what it needs is not installed, unless ``AEROWEAVER_ALLOW_SKIP`` names it; the
+terminal summary says what was missing and whether that was allowed.
+"""
 
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
+from pathlib import Path
 
 import pytest
 
+from tests.helpers.requirements import ALLOW_SKIP_ENV, REQUIREMENTS, allowed_skips, decide, missing
 from tests.helpers.zenoh_net import ZenohNet
+
+_allowed: frozenset[str] = frozenset()
+_met: dict[str, str] = {}  # requirement -> why it was missing, for the summary
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    global _allowed
+    try:
+        _allowed = allowed_skips()
+    except ValueError as exc:
+        raise pytest.UsageError(str(exc)) from None
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    for name in REQUIREMENTS:
+        if item.get_closest_marker(name) is None:
+            continue
+        why = missing(name)
+        verdict = decide(name, why, _allowed)
+        if why is not None:
+            _met[name] = why
+        if verdict == "skip":
+            pytest.skip(f"{why} (allowed by {ALLOW_SKIP_ENV})")
+        if verdict == "fail":
+            pytest.fail(
+                f"{why}. Install it, or run with {ALLOW_SKIP_ENV}={name} to skip these tests.",
+                pytrace=False,
+            )
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    for name, why in sorted(_met.items()):
+        how = "skipped: allowed" if name in _allowed else "FAILED: not allowed"
+        terminalreporter.write_line(f"requirement '{name}' missing ({how}): {why}")
+
+
+@pytest.fixture(scope="session")
+def _empty_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("cwd")
+
+
+@pytest.fixture(autouse=True)
+def _elsewhere(_empty_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Not the repository root: a relative path in a test fails here, in every run."""
+    monkeypatch.chdir(_empty_dir)
 
 
 @pytest.fixture

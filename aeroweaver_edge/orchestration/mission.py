@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aeroweaver_edge import defaults as d
-from aeroweaver_edge.config import ConfigError, LLMConfig, MeshConfig, SimConfig
+from aeroweaver_edge.config import ConfigError, LLMConfig, MeshConfig, SafetyConfig, SimConfig
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.orchestration.swarm import world_task
@@ -48,6 +48,7 @@ class MissionStartOptions:
     max_rounds: int = d.MAX_ROUNDS
     deadline_s: float = d.DEADLINE_S
     world_mesh: MeshConfig | None = None  # the world's own session (secured); None: shares ours
+    safety: SafetyConfig = field(default_factory=SafetyConfig)  # the envelope the world checks
 
 
 async def start_mission(
@@ -94,8 +95,9 @@ async def start_mission(
                     stack.push_async_callback(world_mesh.aclose)
                     world_headers = await asyncio.to_thread(boot_headers, opts.world_mesh, WORLD)
                 runner = WorldRunner(
-                    world_mesh, opts.swarm, task, cfg, on_round=hook, headers=world_headers
-                )
+                    world_mesh, opts.swarm, task, cfg, on_round=hook, headers=world_headers,
+                    safety=opts.safety,
+                )  # fmt: skip
                 await runner.start()
                 stack.push_async_callback(runner.aclose)
                 await runner.wait_alive(plan.participants, 10.0)
@@ -107,6 +109,7 @@ async def start_mission(
                          "agent_returns": {u: res.returns[u] for u in task.uav_ids},
                          "scripted_returns": {b: res.returns[b] for b in task.scripted_ids}}
                     )  # fmt: skip
+                out["envelope_violations"] = runner.envelope.summary()
                 out["ended"] = (
                     "complete"
                     if all(e["reason"] == "complete" for e in out["episodes"])

@@ -29,7 +29,14 @@ from typing import Any, Literal
 
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.agent.memory import new_run_id
-from aeroweaver_edge.config import AgentConfig, LLMConfig, MeshConfig, SimConfig, UavConfig
+from aeroweaver_edge.config import (
+    AgentConfig,
+    LLMConfig,
+    MeshConfig,
+    SafetyConfig,
+    SimConfig,
+    UavConfig,
+)
 from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
@@ -77,6 +84,7 @@ class SwarmOptions:
     state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
     trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
     secure: bool = True  # TLS (mutual) + ACL + signatures with per-run identities
+    safety: SafetyConfig = field(default_factory=SafetyConfig)  # the daemons'; the world checks it
 
 
 @dataclass
@@ -118,6 +126,7 @@ class RunSummary:
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
     link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
     security: dict[str, Any] = field(default_factory=dict)  # security_fields()
+    envelope_violations: dict[str, Any] = field(default_factory=dict)  # sim/envelope.py
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -160,6 +169,7 @@ class RunSummary:
             "setup_tokens": self.setup_tokens,
             "mission": self.mission,
             "llm_calls": self.llm_calls,
+            "envelope_violations": self.envelope_violations,
             "llm_classes": self.llm_classes,
             "run_id": self.run_id,
             "wall_s": round(self.wall_s, 3),
@@ -365,6 +375,7 @@ async def run_swarm(
         runner = WorldRunner(
             world_mesh, opts.swarm, task, sim_cfg, on_round=round_hook,
             vehicles=linked.bridge if linked else None, headers=world_headers,
+            safety=opts.safety,
         )  # fmt: skip
         await runner.start()
         stack.push_async_callback(runner.aclose)
@@ -394,6 +405,7 @@ async def run_swarm(
                     history_rounds=opts.history_rounds,
                     state_context=opts.state_context,
                 ),
+                safety=opts.safety,
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
             for i, u in enumerate(uavs)
@@ -460,6 +472,7 @@ async def run_swarm(
             + sum((p.last.decode_errors if p.last else 0) for p in board.uavs.values())
         )
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
+        summary.envelope_violations = runner.envelope.summary()
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
         cached = sum(p.prompt_cached for p in board.uavs.values())

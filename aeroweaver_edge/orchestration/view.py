@@ -126,6 +126,12 @@ def print_summary(summary: dict[str, Any], console: Console | None = None) -> No
         console.print(f"flown by the world (not in the team mean): {theirs}")
     if s.get("holds"):
         console.print(f"holds by cause: {format_counts(s.get('holds_by_cause') or {})}")
+    env = s.get("envelope_violations") or {}
+    if env.get("total"):  # the world saw a command outside the envelope: a gate failed
+        console.print(
+            f"[bold red]envelope violations {env['total']}[/]: "
+            f"{format_counts(env.get('by_kind') or {})} (of {env.get('checked', 0)} commands)"
+        )
     sides = s.get("deadline_misses_by_side") or {}
     if s.get("deadline_misses") and sides:
         console.print(

@@ -27,12 +27,13 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from aeroweaver_edge.config import SimConfig
+from aeroweaver_edge.config import SafetyConfig, SimConfig
 from aeroweaver_edge.defaults import COMM_RADIUS_M
 from aeroweaver_edge.inbox import RADIO_DROPS
 from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.sim.command_check import CommandCheck
+from aeroweaver_edge.sim.envelope import EnvelopeCheck, Violation
 from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
 from aeroweaver_edge.tasks.base import TaskDefinition
 from aeroweaver_edge.wire import (
@@ -74,6 +75,7 @@ class RoundLog:
     bodies: tuple[Entity, ...] = ()
     entities: tuple[Entity, ...] = ()
     refused: dict[str, int] = field(default_factory=dict)  # world-side refusals this round
+    violations: tuple[Violation, ...] = ()  # envelope violations among the applied commands
 
 
 @dataclass
@@ -97,8 +99,12 @@ class WorldRunner:
         comm_radius_m: float = COMM_RADIUS_M,
         vehicles: EmulatorBridge | None = None,
         headers: HeaderFactory | None = None,
+        safety: SafetyConfig | None = None,
     ) -> None:
         self.mesh = mesh
+        # The envelope invariant: every applied command is judged against the daemons'
+        # envelope (default: the default one), independently of their safety gates.
+        self.envelope = EnvelopeCheck(safety or SafetyConfig(), horizon_s=cfg.round_s)
         self.comm_radius_m = comm_radius_m
         # flight link (sim --link mavlink|mavsdk): emulated autopilots fly the bodies
         self.vehicles = vehicles
@@ -257,8 +263,11 @@ class WorldRunner:
                 if uav not in self.alive:
                     world.mark_absent(uav)
             scripted = ep.scripted(await self._hear(rnd, world, expect))
+            told: dict[str, list[str]] = {}  # the UAVs each one perceives
             for uav in present:
                 body = world.body(uav)
+                seen = self.task.visible(world, uav)
+                told[uav] = [e.id for e in seen if e.kind == "uav"]
                 self.mesh.put(
                     self.keys.sim_perception(uav),
                     SimPerception(
@@ -269,7 +278,7 @@ class WorldRunner:
                         deadline_s=self.cfg.deadline_s,
                         pos=body.pos,
                         vel=body.vel,
-                        entities=self.task.visible(world, uav),
+                        entities=seen,
                         expected_inbox=expect.get(uav, []),
                         facts=self.task.private_facts(world, uav),
                     ),
@@ -295,6 +304,9 @@ class WorldRunner:
                 # flight link: the bodies move as the autopilots were told over MAVLink; wait
                 # until each declared setpoint has arrived, then hold only the silent UAVs.
                 orders = await self.vehicles.settle(commands, controlled)
+            violations = self.envelope.check_round(
+                episode, rnd, {b.id: b.pos for b in world.bodies()}, orders, told
+            )
             ep.apply_actions(scripted)
             ep.apply(orders, guesses)
             res = ep.advance()
@@ -328,6 +340,7 @@ class WorldRunner:
                         bodies=tuple(b.as_entity() for b in world.bodies()),
                         entities=tuple(world.entities()),
                         refused=dict(self.refusals() - refused_before),
+                        violations=tuple(violations),
                     )
                 )
         result = ep.result()

@@ -222,3 +222,99 @@ async def test_a_decoded_guess_leaves_the_round_and_the_eavesdropper_is_not_a_pe
     assert out1[sender].guess is None
     facts = r.scorers[receiver].requests[-1].observation.facts
     assert set(facts) == {"key"}  # never the sender's symbol
+
+
+# ------------------------------------------------------------------ what reaches the vehicle
+
+
+class Spy(LocalBody):
+    """The in-process body, recording which Vehicle calls the round made."""
+
+    def __init__(self, *args: object, **kw: object) -> None:
+        super().__init__(*args, **kw)  # type: ignore[arg-type]
+        self.calls: list[str] = []
+
+    async def hold(self) -> None:
+        self.calls.append("hold")
+        await super().hold()
+
+    async def set_velocity(self, north: float, east: float, down: float) -> None:
+        self.calls.append("set_velocity")
+        await super().set_velocity(north, east, down)
+
+
+class Slow(ReferenceScorer):
+    def __init__(self, delay_s: float) -> None:
+        super().__init__()
+        self.delay_s = delay_s
+
+    async def score(self, request: DecisionRequest) -> LabelScores:
+        await asyncio.sleep(self.delay_s)
+        return await super().score(request)
+
+
+def spied(r: Rig, uav: str = "uav0") -> Spy:
+    spy = Spy(r.world, uav, r.task)
+    r.contexts[uav].vehicle = spy
+    r.world.set_velocity(uav, (5.0, 0.0))  # a motion a hold must end
+    return spy
+
+
+@pytest.mark.parametrize("why", ["chosen", "unassigned", "selector error"])
+async def test_every_hold_reaches_the_vehicle_as_a_hold(registry: SkillRegistry, why: str) -> None:
+    """A hold is the vehicle's hold (an autopilot's Hold mode), never a zero velocity."""
+    r = rig(registry, "coverage", 1, ("hold_position",) if why == "chosen" else COVER)
+    spy = spied(r)
+    if why == "unassigned":
+        r.views["uav0"] = None
+    if why == "selector error":
+        r.contexts["uav0"].selector = Erroring()
+    out = (await r.play(0))["uav0"]
+    assert out.held
+    assert spy.calls == ["hold"]
+    assert r.world.body("uav0").setpoint == (0.0, 0.0, 0.0)
+    assert (out.dropped, out.sent) == (0, ())
+
+
+async def test_a_move_is_one_velocity_setpoint_and_the_round_accounts_for_itself(
+    registry: SkillRegistry,
+) -> None:
+    r = rig(registry, "coverage", 1, ("explore_local", "hold_position"))
+    spy = spied(r)
+    out = (await r.play(0))["uav0"]
+    assert (out.skill, out.held, spy.calls) == ("explore_local", False, ["set_velocity"])
+    assert out.dropped == 0
+    assert 0.0 <= out.cpu_s <= out.latency_s + 0.05  # this thread's CPU time within the round
+
+
+async def test_the_deadline_keeps_a_margin_for_the_command_to_travel(
+    registry: SkillRegistry,
+) -> None:
+    """Budget = deadline - 0.25 s (at least 0.05 s): a 0.2 s decision fits a 1 s deadline,
+    and does not fit a 0.2 s one."""
+    r = rig(registry, "coverage", 1, COVER)
+    r.contexts["uav0"].selector = Slow(0.2)
+    assert (await r.play(0, deadline_s=1.0))["uav0"].chosen_by_agent
+    late = (await r.play(1, deadline_s=0.2))["uav0"]
+    assert (late.held, late.reason, late.hold_cause) == (True, "deadline", "deadline")
+
+
+class NoMemory:
+    """Experience memory that must not be asked: beta = 0 means no correction."""
+
+    async def advantages(self, *args: object) -> dict[str, float]:
+        raise AssertionError("advantages asked for with beta = 0")
+
+
+async def test_experience_is_asked_only_when_it_can_change_the_pick(
+    registry: SkillRegistry,
+) -> None:
+    r = rig(registry, "coverage", 1, COVER)
+    r.contexts["uav0"].memory = NoMemory()  # type: ignore[assignment]
+    assert (await r.play(0))["uav0"].chosen_by_agent  # beta = 0: never asked
+    rc = r.contexts["uav0"]
+    r.contexts["uav0"] = RoundContext(**{**rc.__dict__, "memory": None, "agent": AgentConfig(
+        selector="scripted", beta=0.8)})  # fmt: skip
+    out = (await r.play(1))["uav0"]  # beta > 0 without a memory: no correction, no error
+    assert out.chosen_by_agent
+    assert not out.corrected

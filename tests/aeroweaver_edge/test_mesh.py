@@ -157,8 +157,9 @@ async def test_liveliness_join_and_leave(zenoh_net: ZenohNet) -> None:
     assert await asyncio.wait_for(watch.get(), 2.0) == (KEYS.alive_uav("c"), False)
 
     late = a.watch_liveliness(KEYS.alive_uav("*"))  # history: nothing alive any more
-    await asyncio.sleep(0.05)
-    assert late.drain() == []
+    a.declare_token(KEYS.alive_uav("a"))  # a sentinel that joins after the watch started
+    assert await asyncio.wait_for(late.get(), 2.0) == (KEYS.alive_uav("a"), True)
+    assert late.drain() == []  # neither b nor c came back from history
 
 
 async def test_aclose_is_idempotent_and_final(zenoh_net: ZenohNet) -> None:

@@ -4,6 +4,7 @@ through, e.g. an ``--insecure`` swarm or a compromised relay)."""
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 from aeroweaver_edge.mesh import Mesh
@@ -80,9 +81,13 @@ async def test_restart_after_leaving_is_accepted_and_old_epoch_refused(zenoh_net
     b.publish_beacon(1, HERE, STILL)  # again, now that a2 listens
     assert await eventually(lambda: "b" in a2.neighbours, 5.0)
     mallory.put(KEYS.inbox("b", "a"), msg("a", 1, 999), block=True)  # the old epoch, replayed
+    # b waits for the restarted a's message with the same seq as a's first one, before it
+    # is sent: that old arrival must not count (b forgot it when a's session ended).
+    waiting = asyncio.create_task(b.collect_inbox([ref], timeout_s=3.0))
+    await asyncio.sleep(0)
     ref2 = await a2.send("b", "status", {"again": True}, round=1)
-    assert ref2 is not None
-    got = await b.collect_inbox([ref2], timeout_s=3.0)  # same seq as a's first message
+    assert ref2 == ref
+    got = await waiting
     assert [m.body for m in got] == [{"again": True}]
     await settled(b, 3)
     assert b.stats.rejected == {"old_epoch": 1}
@@ -171,3 +176,30 @@ async def test_beacon_must_be_physically_plausible(zenoh_net: ZenohNet) -> None:
     assert await b.send("a", "status", {}, round=2) is not None  # still in range
     forge(0, (60.0, 60.0, -5.0))  # a new episode: rounds restart, layouts teleport
     assert await eventually(lambda: b.neighbours["a"].pos == (60.0, 60.0, -5.0))
+
+
+async def test_a_round_stands_for_half_a_second_by_default(zenoh_net: ZenohNet) -> None:
+    """With the default round time (the world's 0.5 s), one round at 11 m/s plus the 5 m
+    margin allows 10.5 m between beacons: exactly that is plausible, 10.6 m is not."""
+    limits = PeerLimits(max_speed_mps=11.0, motion_margin_m=5.0)
+    _, b, mallory = await pair(zenoh_net, limits)
+    hf = HeaderFactory("a", epoch=1)
+    hf._seq = 1000  # after a's own beacons
+
+    def forge(round_: int, north: float) -> None:
+        beacon = StateBeacon(h=hf.next(), uav="a", round=round_, pos=(north, 0.0, -5.0), vel=STILL)
+        mallory.put(KEYS.state("a"), beacon, block=True)
+
+    forge(2, 10.6)  # one round after a's own beacon at the origin: too far
+    forge(2, 10.5)
+    assert await eventually(lambda: b.neighbours["a"].pos == (10.5, 0.0, -5.0))
+    assert b.stats.rejected == {"implausible_motion": 1}
+
+
+async def test_a_closed_link_sends_nothing(zenoh_net: ZenohNet) -> None:
+    """After ``aclose`` the session may live on (the daemon owns it); the link must not."""
+    a, _b, _ = await pair(zenoh_net)
+    await a.aclose()
+    assert await a.send("b", "status", {"n": 1}, round=1) is None
+    assert a.stats.dropped["closed"] == 1
+    assert a.stats.sent == 0

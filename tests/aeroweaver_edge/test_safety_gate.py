@@ -167,9 +167,43 @@ def test_negative_speed_holds_instead_of_flying_away() -> None:
     assert_hold(out, "speed")
 
 
-def test_separation_hold_when_closing_in() -> None:
+def test_separation_slows_a_fast_approach_to_half_the_spare_gap() -> None:
+    """3 m away, 2 m minimum: at most (3 - 2) / 2 = 0.5 m closer this horizon, so 1 m/s."""
     out = GATE.gate(SetVelocity((4.0, 0.0, 0.0)), HOME, neighbours=[(3.0, 0.0, -5.0)])
-    assert_hold(out, "separation")
+    assert not out.held
+    assert out.vel == pytest.approx((1.0, 0.0, 0.0), abs=1e-12)
+    assert any("separation" in v for v in out.violations)
+    slow = GATE.gate(SetVelocity((1.0, 0.0, 0.0)), HOME, neighbours=[(3.0, 0.0, -5.0)])
+    assert (slow.vel, slow.violations) == ((1.0, 0.0, 0.0), ())  # exactly the allowance: as is
+
+
+def test_separation_hold_when_no_spare_gap_is_left() -> None:
+    at_minimum: Vec3 = (2.0, 0.0, -5.0)
+    assert_hold(GATE.gate(SetVelocity((0.1, 0.0, 0.0)), HOME, [at_minimum]), "separation")
+    sideways = GATE.gate(SetVelocity((0.0, 4.0, 0.0)), HOME, [at_minimum])
+    assert (sideways.held, sideways.vel) == (False, (0.0, 4.0, 0.0))  # not closing in
+
+
+def test_a_body_that_runs_no_gate_may_be_approached_to_the_minimum() -> None:
+    """An evader the world flies keeps no half of the gap: the pursuer may use all of it."""
+    evader: Vec3 = (6.0, 0.0, -5.0)
+    out = GATE.gate(SetVelocity((11.0, 0.0, 0.0)), HOME, others=[evader])
+    assert out.vel == pytest.approx((8.0, 0.0, 0.0))  # (6 - 2) m in 0.5 s
+    assert math.dist(ahead(HOME, out.vel), evader) == pytest.approx(2.0)
+    as_peer = GATE.gate(SetVelocity((11.0, 0.0, 0.0)), HOME, neighbours=[evader])
+    assert as_peer.vel == pytest.approx((4.0, 0.0, 0.0))  # a gated peer: half of it
+    assert_hold(GATE.gate(SetVelocity((1.0, 0.0, 0.0)), HOME, others=[(2.0, 0.0, -5.0)]))
+
+
+def test_two_uavs_flying_at_each_other_end_the_round_apart() -> None:
+    """Each judges only the other's last known position, yet the pair keeps the minimum:
+    the old rule let both take the full step and meet (0.4 m in a swarm test)."""
+    a: Vec3 = (0.0, 0.0, -5.0)
+    b: Vec3 = (7.5, 0.0, -5.0)
+    va = GATE.gate(MoveTo(b, speed=155.0), a, [b]).vel
+    vb = GATE.gate(MoveTo(a, speed=155.0), b, [a]).vel
+    assert math.dist(ahead(a, va), ahead(b, vb)) == pytest.approx(2.0)
+    assert va[0] > 0 > vb[0]  # both still closed in as far as the pair allows
 
 
 def test_separation_hold_when_move_to_targets_a_neighbour() -> None:
@@ -198,7 +232,9 @@ def test_separation_ignores_non_finite_neighbours_and_can_be_disabled() -> None:
 def test_separation_checks_every_neighbour() -> None:
     far: Vec3 = (-40.0, 0.0, -5.0)
     near: Vec3 = (2.5, 0.0, -5.0)
-    assert_hold(GATE.gate(SetVelocity((2.0, 0.0, 0.0)), HOME, [far, near]), "separation")
+    out = GATE.gate(SetVelocity((2.0, 0.0, 0.0)), HOME, [far, near])
+    assert out.vel == pytest.approx((0.5, 0.0, 0.0))  # the near one binds: 0.25 m closer
+    assert_hold(GATE.gate(SetVelocity((2.0, 0.0, 0.0)), HOME, [far, (1.5, 0.0, -5.0)]))
 
 
 def test_huge_finite_velocity_keeps_its_direction() -> None:
@@ -302,3 +338,29 @@ def test_gated_command_always_fits_the_envelope(
             if all(math.isfinite(x) for x in other):
                 d_now, d_next = math.dist(pos, other), math.dist(nxt, other)
                 assert not (d_next < cfg.min_separation_m and d_next < d_now - 1e-9)
+
+
+@settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    cfg=envelopes(),
+    frac=st.tuples(unit, unit, unit),
+    offset=st.tuples(*[st.floats(-15.0, 15.0)] * 3),
+    motions=st.tuples(motions, motions),
+    horizon=st.floats(0.05, 5.0),
+)
+def test_two_gated_uavs_never_close_in_below_the_minimum_together(
+    cfg: SafetyConfig,
+    frac: tuple[float, float, float],
+    offset: Vec3,
+    motions: tuple[Motion, Motion],
+    horizon: float,
+) -> None:
+    """Both decide at once on each other's last known position (the lockstep round)."""
+    a = point_in(cfg, *frac)
+    b = (a[0] + offset[0], a[1] + offset[1], a[2] + offset[2])
+    gate = SafetyGate(cfg, horizon)
+    va = gate.gate(motions[0], a, [b]).vel
+    vb = gate.gate(motions[1], b, [a]).vel
+    d_now = math.dist(a, b)
+    d_next = math.dist(ahead(a, va, horizon), ahead(b, vb, horizon))
+    assert d_next >= min(cfg.min_separation_m, d_now) - 1e-6

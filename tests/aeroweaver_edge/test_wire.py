@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import logging
+import subprocess
+import sys
 
 import msgspec
 import pytest
@@ -369,9 +372,16 @@ def test_header_factory_sequence_is_strictly_increasing() -> None:
 
 
 def test_header_factory_default_epoch_differs_per_boot() -> None:
-    a, b = HeaderFactory("u"), HeaderFactory("u")
-    assert a.epoch > 0
-    assert b.epoch >= a.epoch
+    """A later boot has a larger epoch: strictly, in this process and in another one."""
+    before = [HeaderFactory("u").epoch for _ in range(1000)]
+    assert before[0] > 1_600_000_000 * 10**9  # wall-clock nanoseconds, not a counter from 0
+    assert all(b > a for a, b in itertools.pairwise(before))
+    code = "from aeroweaver_edge.wire import HeaderFactory as H; print(H('u').epoch)"
+    child = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
+    after = HeaderFactory("u").epoch
+    assert before[-1] < int(child.stdout) < after
 
 
 def _h(sender: str, epoch: int, seq: int) -> Header:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+import commander
 from aeroweaver_edge.skills import SkillRegistry
 from commander.eval_retrieval import (
     VARIANTS,
@@ -27,7 +28,7 @@ def test_recall_at_k() -> None:
 def test_phrasings_are_well_formed(registry: SkillRegistry) -> None:
     data = load_phrasings()
     assert set(data) == set(TASK_TYPES)
-    raw = json.loads(Path("commander/data/mission_phrasings.json").read_text())
+    raw = json.loads((Path(commander.__file__).parent / "data/mission_phrasings.json").read_text())
     for task, tp in data.items():
         assert all(s in registry for s in tp.required), task
         original = tp.phrasings["original"]

@@ -8,23 +8,13 @@ from __future__ import annotations
 
 import pytest
 
-from aeroweaver_edge.llm import embedded
 from aeroweaver_edge.llm.client import ChatClient
-from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable
+from aeroweaver_edge.llm.embedded import EmbeddedServer
 from aeroweaver_edge.skills import load_skills
 from commander.harness import plan_mission
 
 
-def _missing() -> str | None:
-    try:
-        embedded.check_available()
-    except EmbeddedUnavailable as exc:
-        return str(exc)
-    return None
-
-
 @pytest.mark.embedded
-@pytest.mark.skipif(_missing() is not None, reason=str(_missing()))
 async def test_plan_mission_on_the_embedded_model() -> None:
     roster = ["uav0", "uav1", "uav2"]
     async with EmbeddedServer() as server:

@@ -559,6 +559,19 @@ def test_corrupt_file_is_quarantined(db: Path, caplog: pytest.LogCaptureFixture)
         assert len(m) == 1
 
 
+def test_a_file_whose_writer_died_at_birth_is_initialised_not_set_aside(db: Path) -> None:
+    """The version table exists but holds no row yet: nothing to quarantine."""
+    conn = sqlite3.connect(db)
+    conn.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
+    conn.commit()
+    conn.close()
+    with ExperienceMemory(db) as m:
+        assert m.quarantined is None
+        add(m, 0, "landmark l1", "a", 1.0)
+        assert len(m) == 1
+    assert list(db.parent.glob("*.corrupt-*")) == []
+
+
 def test_damaged_index_page_fails_integrity_check(db: Path) -> None:
     with ExperienceMemory(db) as m:
         fill_small(m)

@@ -133,7 +133,11 @@ async def test_close_ends_hanging_requests() -> None:
     fp = await FakeProvider(QUIRKS["hang"]).start()
     http = httpx.AsyncClient(base_url=fp.base_url, timeout=5)
     task = asyncio.create_task(http.post("/chat/completions", json=CHAT))
-    await asyncio.sleep(0.1)
+    for _ in range(200):  # until the request hangs in the server (bounded: 2 s)
+        if fp.chat_bodies():
+            break
+        await asyncio.sleep(0.01)
+    assert fp.chat_bodies()
     await asyncio.wait_for(fp.close(), 2)
     with pytest.raises(httpx.TransportError):
         await task

@@ -213,12 +213,10 @@ async def test_breaker_opens_fails_fast_then_half_opens(fp: FakeProvider) -> Non
             with pytest.raises(LLMHTTPError):
                 await client.chat(MSGS)
         assert state_of(client) == "open"
-        calls = fp.chat_calls
-        started = time.perf_counter()
+        calls = len(fp.requests)
         with pytest.raises(LLMBreakerOpen, match="circuit breaker open for http") as info:
             await client.chat(MSGS)
-        assert time.perf_counter() - started < 0.2
-        assert fp.chat_calls == calls  # no request went out
+        assert len(fp.requests) == calls  # it failed fast: no request went out
         assert "2 consecutive failures" in str(info.value)
         # still failing after the reset time: the single trial re-opens the breaker
         await asyncio.sleep(0.35)

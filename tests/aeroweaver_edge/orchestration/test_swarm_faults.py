@@ -28,13 +28,17 @@ async def test_hanging_endpoint_holds_every_uav_inside_the_round_and_opens_the_b
         )  # fmt: skip
         opts = SwarmOptions(uavs=3, seed=2, max_rounds=rounds, selector="llm", beta=0.0, llm=llm)
         summary = await run_swarm(opts)
-        calls = fake.chat_calls
+        requests = len(fake.chat_bodies())  # every request that reached it (none answered)
 
     assert summary.episodes[0]["rounds"] == rounds
     assert summary.holds == 3 * rounds  # every decision became a hold of that UAV only
+    assert summary.holds_by_cause["llm_failure"] == 3 * rounds  # ...because the LLM failed
     assert summary.deadline_misses == 0  # ...inside the round: the world never waited it out
-    # Each daemon probed once, then tried until its breaker opened and stopped calling.
-    assert calls <= 3 * (1 + 2) + 3  # probes + breaker_failures per daemon (+ half-open slack)
+    # The run's probe, then per daemon its probe (failure 1) and one round's request
+    # (failure 2: the breaker opens and stays open). Fewer means a daemon never asked the
+    # endpoint (an always-hold selector); more means the breaker did not stop the calls.
+    assert summary.llm_calls == 3
+    assert requests == 1 + 3 * 2
 
 
 async def test_a_reassignment_mid_mission_is_picked_up_by_the_running_daemons() -> None:

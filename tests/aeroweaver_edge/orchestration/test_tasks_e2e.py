@@ -16,16 +16,18 @@ from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 from aeroweaver_edge.tasks import TASK_NAMES, get_spec
 
 # team mean return, rounds, end of the episode: seed 1, default team, scripted reference
+# (re-pinned when the safety gate began keeping separation reciprocally: UAVs slide past
+# each other instead of taking the whole gap; bench reference over 5 seeds in docs/testing.md)
 PINNED: dict[str, tuple[float, int, str]] = {
-    "coverage": (-24.04271252211335, 24, "horizon"),
-    "pursuit_evasion": (90.0, 24, "complete"),
-    "guided_navigation": (-3.32672923737776, 14, "complete"),
+    "coverage": (-26.693824461883835, 24, "horizon"),
+    "pursuit_evasion": (70.0, 24, "complete"),
+    "guided_navigation": (-3.3267287956580245, 14, "complete"),
     "private_communication": (4.0, 3, "complete"),
-    "circular_formation": (-8.455572936827354, 18, "complete"),
+    "circular_formation": (-8.883145188301205, 21, "complete"),
     "line_formation": (-7.449791114886901, 15, "complete"),
-    "world_communication": (29.17502749210424, 24, "horizon"),
-    "collection_delivery": (13.671149859620007, 24, "horizon"),
-    "goal_concealment": (0.4070415600082521, 24, "horizon"),
+    "world_communication": (29.16124831296148, 24, "horizon"),
+    "collection_delivery": (13.678092992947999, 24, "horizon"),
+    "goal_concealment": (0.09518363368891022, 24, "horizon"),
 }
 
 

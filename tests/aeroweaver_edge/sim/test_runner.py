@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from aeroweaver_edge.config import SimConfig
+from aeroweaver_edge.config import SafetyConfig, SimConfig
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
@@ -91,6 +91,7 @@ async def play(
     policies: dict[str, Policy],
     rounds: int,
     task: TaskDefinition | None = None,
+    safety: SafetyConfig | None = None,
 ) -> tuple[WorldRunner, EpisodeResult, list[RoundLog], dict[str, StandIn]]:
     world_mesh = await net.open("world")
     cfg = SimConfig(uavs=len(policies), max_rounds=rounds, deadline_s=DEADLINE_S)
@@ -105,6 +106,7 @@ async def play(
         task or create("coverage", len(policies), max_rounds=rounds),
         cfg,
         on_round=on_round,
+        safety=safety,
     )
     await runner.start()
     try:
@@ -213,3 +215,33 @@ async def test_private_facts_reach_only_their_role_and_guesses_are_scored(
     # Bob right: 0 per round; wrong: -2 per round (3 rounds); Eve never spoke.
     assert result.returns["uav1"] == (0.0 if right else -6.0)
     assert result.returns["eavesdropper0"] == 0.0
+
+
+async def test_every_applied_command_is_judged_against_the_configured_envelope(
+    zenoh_net: ZenohNet,
+) -> None:
+    """A stand-in with no gate at all: the world counts what it is told to fly; a hold, a
+    missed round and a command inside the envelope count nothing."""
+    tight = SafetyConfig(max_speed_mps=5.0)
+
+    def raw(p: SimPerception, hf: HeaderFactory) -> list[tuple[str, SimCommand]]:
+        vel = {0: (0.0, -155.0, 0.0), 1: (0.0, 6.0, 0.0), 2: (0.0, 4.0, 0.0)}.get(p.round)
+        if vel is None:
+            return []  # round 3: silent (the world holds it)
+        return [(KEYS.sim_command(p.uav), command(hf, p, vel=vel))]
+
+    runner, _result, logs, _ins = await play(
+        zenoh_net, {"uav0": raw, "uav1": holding}, 4, safety=tight
+    )
+    per_round = [sorted((v.uav, v.kind) for v in log.violations) for log in logs]
+    assert per_round == [
+        [("uav0", "geofence"), ("uav0", "speed")],  # 155 m/s west: 77 m on, out of the fence
+        [("uav0", "speed")],  # 6 m/s against a 5 m/s envelope (the world's physics: 11)
+        [],
+        [],
+    ]
+    summary = runner.envelope.summary()
+    assert summary["total"] == 3
+    assert summary["by_uav"] == {"uav0": {"geofence": 1, "speed": 2}}
+    assert (summary["checked"], summary["moving"]) == (8, 3)
+    assert summary["envelope"]["max_speed_mps"] == 5.0

@@ -10,10 +10,10 @@ import pytest
 from aeroweaver_edge.config import SafetyConfig, VehicleConfig
 from aeroweaver_edge.sim.emulator.host import EmulatorOptions
 from aeroweaver_edge.vehicle.errors import VehicleError
+from aeroweaver_edge.vehicle.mavsdk_backend import MavsdkVehicle
 from tests.helpers.mav import FAST, ThreadedEmulator, free_udp_ports, until
 
-pytest.importorskip("mavsdk.asyncio", reason="optional extra [mavsdk] not installed")
-from aeroweaver_edge.vehicle.mavsdk_backend import MavsdkVehicle
+pytestmark = pytest.mark.mavsdk  # fails without the extra (tests/conftest.py)
 
 
 def config(port: int, **over: object) -> VehicleConfig:

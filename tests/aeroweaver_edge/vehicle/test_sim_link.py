@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import pytest
 
 from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.ports import RewardEvent
 from aeroweaver_edge.vehicle.sim import SimLink
 from aeroweaver_edge.wire import (
     Entity,
@@ -126,20 +127,25 @@ async def test_the_reward_of_a_round_arrives_before_the_next_round(
     tick = await asyncio.wait_for(link.next_round(), 3.0)
     assert tick is not None
     await link.finish(tick, sent=[])
-    world.perceive(1)  # the next perception overtakes the reward...
     nxt = asyncio.create_task(link.next_round())
-    await asyncio.sleep(0.1)
+    await asyncio.sleep(0)  # it waits for a perception now
+    world.perceive(1)  # the next perception overtakes the reward...
+    world.perceive(2)  # (a sentinel: queued once round 1's perception has been taken)
+    assert await eventually(lambda: link._ticks.qsize() == 1)
     assert not nxt.done()  # ...but the round waits for round 0's reward
     world.reward(0, 2.5, done=False)
     tick = await asyncio.wait_for(nxt, 3.0)
     assert tick is not None
+    assert tick.round == 1
     [event] = link.drain()
     assert (event.episode, event.round, event.reward, event.done, event.source) == (
         0, 0, 2.5, False, "sim",
     )  # fmt: skip
-    world.reward(0, 2.5)  # a duplicate is ignored
-    await asyncio.sleep(0.1)
-    assert link.drain() == []
+    world.reward(0, 2.5)  # a duplicate is ignored...
+    world.reward(1, -1.0)  # ...as the next reward, sent after it on the same key, shows
+    got: list[RewardEvent] = []
+    assert await eventually(lambda: bool(got.extend(link.drain())) or got != [])
+    assert [(e.round, e.reward) for e in got] == [(1, -1.0)]
 
 
 async def test_shutdown_ends_the_clock(pair: tuple[World, SimLink]) -> None:
