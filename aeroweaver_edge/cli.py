@@ -156,7 +156,7 @@ def cmd_daemon(args: argparse.Namespace) -> int:
     build_zenoh_config(cfg.mesh)  # a bad endpoint or namespace: a config error, now
     if cfg.agent.memory_required:
         check_memory_path(cfg.agent.memory_path)
-    if cfg.agent.selector == "llm":
+    if cfg.agent.selector in ("llm", "hmas2"):
         check_api_key_env(cfg.llm.api_key_env)
         check_llm_url(cfg.llm.base_url, "llm.base_url")
     check_skills()
