@@ -500,7 +500,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument(
-        "what", choices=["memory", "memory-kill", "scale", "reference", "mavlink", "llm_latency"]
+        "what",
+        choices=["run", "memory", "memory-kill", "scale", "reference", "mavlink", "llm_latency"],
+        help="run: the benchmark (tasks x conditions x seeds; 'aeroweaver bench run --help')",
     )
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
     b.add_argument("--kills", type=int_in(1), default=200, help="memory-kill: SIGKILLs")
@@ -539,7 +541,36 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
+    """``[-v] bench run ...``: (verbose, the runner's own arguments), else None. The
+    benchmark runner has its own parser (its --seeds, --tasks, --rounds mean other things)."""
+    args = list(argv)
+    verbose = False
+    while args and args[0] in ("-v", "--verbose"):
+        verbose, args = True, args[1:]
+    if args[:2] == ["bench", "run"]:
+        return verbose, args[2:]
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    bench_run = _bench_run_args(sys.argv[1:] if argv is None else argv)
+    if bench_run is not None:
+        from aeroweaver_edge.bench import runner
+
+        verbose, rest = bench_run
+        logging.basicConfig(
+            level=logging.DEBUG if verbose else logging.WARNING,
+            format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+            stream=sys.stderr,
+        )
+        try:
+            return runner.main(rest)
+        except (KeyboardInterrupt, asyncio.CancelledError):
+            print("aeroweaver: bench stopped; rerun the same command to resume", file=sys.stderr)
+            return 130
+        except Exception as exc:
+            return report(exc, verbose=verbose)
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING,
