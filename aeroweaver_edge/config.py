@@ -201,6 +201,9 @@ class AgentConfig(_Section):
     # Send coordination reports (intent, target, status) to peers. False (an ablation):
     # only task-required messages (goal, ciphertext) go out.
     coordination_reports: bool = True
+    # Experience retrieval uses only finalised returns (trajectories that ended), not the
+    # in-flight ones of the current episode (agent.memory, docs/adaptation.md).
+    finalised_only: bool = False
 
     @field_validator("run_id")
     @classmethod

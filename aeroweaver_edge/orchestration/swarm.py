@@ -76,6 +76,7 @@ class SwarmOptions:
     activation: Literal["topk", "full"] = "topk"
     coordination: bool = True
     central_gather_s: float = 3.0  # the central node waits this long for a round's asks
+    finalised_only: bool = False  # AgentConfig.finalised_only (retrieval of ended episodes)
 
 
 @dataclass
@@ -420,6 +421,7 @@ async def run_swarm(
                     history_rounds=opts.history_rounds,
                     state_context=opts.state_context,
                     coordination_reports=opts.coordination,
+                    finalised_only=opts.finalised_only,
                 ),
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
