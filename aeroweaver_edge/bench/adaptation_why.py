@@ -196,9 +196,9 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             f"{sum(r['bound_rule'] for r in rs)} | {h['chosen']} / {h['safety_gate']} / "
             f"{h['llm_failure'] + h['deadline']} / {h['invalid_answer']} |"
         )
-    ages = [r["age_bias"] for r in rows if r["variant"] == "beta=0"] or [
-        r["age_bias"] for r in rows
-    ]
+    ages = [r["age_bias"] for r in rows if r["variant"] == "beta=0"]
+    ages = ages or [r["age_bias"] for r in rows]
+    finals = [x["finalised_mean"] for x in ages if x["finalised_mean"] is not None]
     if ages:
         keys = sorted({int(a) for x in ages for a in x["in_flight_by_age"]})
         lines += [
