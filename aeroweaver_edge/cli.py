@@ -498,6 +498,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_security_parsers(sub)  # keys init|rotate|show, router
 
+    from aeroweaver_edge.baselines.cli import add_parser as add_central
+
+    add_central(sub)  # a baseline's central node as its own process
+
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument(
         "what",
