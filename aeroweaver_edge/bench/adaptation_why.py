@@ -20,6 +20,7 @@ records look better whatever was chosen (``age_bias``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import statistics
 import sys
@@ -48,7 +49,7 @@ def _mean(xs: Sequence[float]) -> float | None:
 def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[str, Any]:
     gaps: list[float] = []
     pushes: list[float] = []
-    scored = corrected = to_hold = to_last = base_last = bound = 0
+    scored = corrected = to_hold = to_last = base_last = bound = to_unseen = 0
     adv_last: list[float] = []
     adv_other: list[float] = []
     holds = dict.fromkeys(HOLD_CAUSES, 0)
@@ -86,6 +87,12 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
                     pick = skills.get(d.get("chosen") or "", "")
                     to_hold += pick == HOLD_SKILL
                     to_last += last is not None and pick == last
+                    # an option without experience (A = 0) beat a base winner whose skill
+                    # looked worse than its neighbourhood (A < 0): "unseen means average"
+                    to_unseen += (
+                        adv.get(d.get("chosen") or "", 0.0) == 0.0
+                        and adv.get(base_winner, 0.0) < 0.0
+                    )
                 bound += str(d.get("reason", "")).startswith("bound rule")
             if d.get("skill"):
                 previous[key] = d["skill"]
@@ -100,6 +107,7 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
         "corrected": corrected,
         "corrected_to_hold": to_hold,
         "corrected_to_last_skill": to_last,
+        "corrected_to_unseen": to_unseen,
         "base_winner_is_last_skill": base_last,
         "advantage_last_skill_mean": _mean(adv_last),
         "advantage_other_skills_mean": _mean(adv_other),
@@ -138,6 +146,28 @@ def age_bias(traces: Iterable[list[dict[str, Any]]], gamma: float) -> dict[str, 
     }
 
 
+def skill_records(memory_dir: Path) -> dict[str, dict[str, float]]:
+    """Per skill, over the UAVs' own records in kept memory files: how many, their mean
+    round and mean (final) return -- where a skill was used, and what followed."""
+    import sqlite3
+
+    by: dict[str, list[tuple[int, float]]] = {}
+    for path in sorted(memory_dir.glob("*.sqlite3")):
+        with contextlib.closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True)) as db:
+            rows = db.execute("SELECT round, skill, ret FROM records WHERE origin = ''")
+            for rnd, skill, ret in rows:
+                if ret is not None:
+                    by.setdefault(skill, []).append((int(rnd), float(ret)))
+    return {
+        s: {
+            "records": len(xs),
+            "mean_round": round(statistics.fmean(r for r, _ in xs), 1),
+            "mean_return": round(statistics.fmean(g for _, g in xs), 2),
+        }
+        for s, xs in sorted(by.items())
+    }
+
+
 def analyse(out: Path, gamma: float) -> list[dict[str, Any]]:
     rows = []
     for result_path in sorted((out / "runs").glob("*/seed*/*/result.json")):
@@ -153,6 +183,11 @@ def analyse(out: Path, gamma: float) -> list[dict[str, Any]]:
                 "mean_return": _mean([e["team_return"] for e in result["episodes"]]),
                 **figures,
                 "age_bias": age_bias([trace], gamma),
+                "skills": (
+                    skill_records(result_path.parent / "memory")
+                    if (result_path.parent / "memory").is_dir()
+                    else {}
+                ),
             }
         )
     return rows
@@ -169,8 +204,8 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     lines = [
         "| task | variant | seeds | mean return | base gap (median, nats) | beta x advantage "
         "spread (median) | push > gap | corrected picks | of which hold / last round's "
-        "skill | base winner = last skill | A(last skill) vs A(others) | bound rule | holds: "
-        "chosen / gate / llm / invalid |",
+        "skill / unseen (A = 0) | base winner = last skill | A(last skill) vs A(others) | "
+        "bound rule | holds: chosen / gate / llm / invalid |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (task, variant), rs in groups.items():
@@ -189,32 +224,59 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             f"{_f(pooled('correction_push_median', _median))} | "
             f"{'–' if push is None else f'{100 * push:.0f} %'} | {corr} of {scored} | "
             f"{sum(r['corrected_to_hold'] for r in rs)} / "
-            f"{sum(r['corrected_to_last_skill'] for r in rs)} | "
+            f"{sum(r['corrected_to_last_skill'] for r in rs)} / "
+            f"{sum(r['corrected_to_unseen'] for r in rs)} | "
             f"{sum(r['base_winner_is_last_skill'] for r in rs)} | "
             f"{_f(pooled('advantage_last_skill_mean'))} vs "
             f"{_f(pooled('advantage_other_skills_mean'))} | "
             f"{sum(r['bound_rule'] for r in rs)} | {h['chosen']} / {h['safety_gate']} / "
             f"{h['llm_failure'] + h['deadline']} / {h['invalid_answer']} |"
         )
-    ages = [r["age_bias"] for r in rows if r["variant"] == "beta=0"]
-    ages = ages or [r["age_bias"] for r in rows]
-    finals = [x["finalised_mean"] for x in ages if x["finalised_mean"] is not None]
-    if ages:
-        keys = sorted({int(a) for x in ages for a in x["in_flight_by_age"]})
+    tasks = list(dict.fromkeys(r["task"] for r in rows))
+    keys = [1, 2, 4, 8, 16]
+    lines += [
+        "",
+        "In-flight return of a record by the number of rewards it has collected so far "
+        "(beta=0 runs, gamma 0.95), against the finalised returns:",
+        "",
+        "| task | "
+        + " | ".join(f"{k} reward{'s' if k > 1 else ''}" for k in keys)
+        + " | finalised |",
+        "|---" * (len(keys) + 2) + "|",
+    ]
+    for task in tasks:
+        ages = [r["age_bias"] for r in rows if r["task"] == task and r["variant"] == "beta=0"]
+        if not ages:
+            continue
+        finals = [x["finalised_mean"] for x in ages if x["finalised_mean"] is not None]
+        cells = [
+            _f(_mean([x["in_flight_by_age"][k] for x in ages if k in x["in_flight_by_age"]]))
+            for k in keys
+        ]
+        lines.append(f"| {task} | " + " | ".join(cells) + f" | {_f(_mean(finals))} |")
+    with_skills = [r for r in rows if r["skills"]]
+    if with_skills:
         lines += [
             "",
-            "In-flight return of a record by the number of rewards it has collected (all "
-            "tasks' beta=0 runs pooled, gamma 0.95), against finalised returns:",
+            "Where each skill was used and what followed (the UAVs' own records in the kept "
+            "memory files, all seeds): records / mean round / mean return:",
             "",
-            "| rewards collected | " + " | ".join(str(k) for k in keys) + " | finalised |",
-            "|---" * (len(keys) + 2) + "|",
-            "| mean return | "
-            + " | ".join(
-                _f(_mean([x["in_flight_by_age"][k] for x in ages if k in x["in_flight_by_age"]]))
-                for k in keys
-            )
-            + f" | {_f(_mean(finals))} |",
+            "| task | variant | skills |",
+            "|---|---|---|",
         ]
+        groups2: dict[tuple[str, str], dict[str, list[dict[str, float]]]] = {}
+        for r in with_skills:
+            g = groups2.setdefault((r["task"], r["variant"]), {})
+            for skill, v in r["skills"].items():
+                g.setdefault(skill, []).append(v)
+        for (task, variant), g in groups2.items():
+            parts = []
+            for skill, vs in sorted(g.items()):
+                n = sum(int(v["records"]) for v in vs)
+                rnd = sum(v["mean_round"] * v["records"] for v in vs) / n
+                ret = sum(v["mean_return"] * v["records"] for v in vs) / n
+                parts.append(f"{skill} {n} / {rnd:.1f} / {ret:.2f}")
+            lines.append(f"| {task} | {variant} | " + "; ".join(parts) + " |")
     return "\n".join(lines) + "\n"
 
 
