@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from aeroweaver_edge.wire import Vec3
+from aeroweaver_edge.wire import MessagePurpose, Vec3
 
 
 @dataclass(frozen=True)
@@ -47,11 +47,17 @@ class VehicleAction:
 
 @dataclass(frozen=True)
 class Outgoing:
-    """A directed message to a named peer (or ``"*"`` for every reachable peer)."""
+    """A directed message to a named peer (or ``"*"`` for every reachable peer).
+
+    ``purpose``: ``"task"`` for what the task cannot be done without (the speaker's goal,
+    the sender's ciphertext), ``"coordination"`` for reports that only help peers coordinate
+    (intent, target, status); the "without coordination reports" ablation drops the latter.
+    """
 
     to: str
     kind: str
     body: dict[str, str | int | float | bool] = field(default_factory=dict)
+    purpose: MessagePurpose = "coordination"
 
 
 @dataclass(frozen=True)

@@ -37,9 +37,22 @@ class SelectorInfo:
 
 @contextlib.asynccontextmanager
 async def open_selector(
-    cfg: UavConfig, agent_name: str
+    cfg: UavConfig,
+    agent_name: str,
+    *,
+    mesh: Mesh | None = None,
+    headers: HeaderFactory | None = None,
 ) -> AsyncIterator[tuple[Selector, SelectorInfo]]:
-    """The selector named in config; an LLM endpoint is probed once before use."""
+    """The selector named in config; an LLM endpoint is probed once before use. A baseline
+    (centralized / hmas2) asks its central node over ``mesh`` (aeroweaver_edge.baselines)."""
+    if cfg.agent.selector in ("centralized", "hmas2"):
+        from aeroweaver_edge.baselines.wiring import open_remote_selector
+
+        if mesh is None or headers is None:
+            raise ValueError(f"the {cfg.agent.selector} selector needs the daemon's mesh")
+        async with open_remote_selector(cfg, mesh, headers) as remote:
+            yield remote, SelectorInfo(remote.name, cfg.llm.model)
+        return
     if cfg.agent.selector == "scripted":
         from aeroweaver_edge.agent.scripted import ReferenceScorer
 
@@ -98,7 +111,9 @@ async def run_daemon(
         await start()
         stack.push_async_callback(stop)
         if selector is None:
-            selector, _info = await stack.enter_async_context(open_selector(cfg, cfg.uav))
+            selector, _info = await stack.enter_async_context(
+                open_selector(cfg, cfg.uav, mesh=mesh, headers=headers)
+            )
         memory = None
         if cfg.agent.beta > 0 or cfg.agent.memory_path is not None:
             from aeroweaver_edge.agent.memory import AsyncExperienceMemory

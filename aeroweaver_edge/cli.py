@@ -164,7 +164,7 @@ def cmd_daemon(args: argparse.Namespace) -> int:
     build_zenoh_config(cfg.mesh)  # a bad endpoint or namespace: a config error, now
     if cfg.agent.memory_required:
         check_memory_path(cfg.agent.memory_path)
-    if cfg.agent.selector == "llm":
+    if cfg.agent.selector in ("llm", "hmas2"):
         check_api_key_env(cfg.llm.api_key_env)
         check_llm_url(cfg.llm.base_url, "llm.base_url")
     check_skills()
@@ -567,10 +567,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_security_parsers(sub)  # keys init|rotate|show, router
 
+    from aeroweaver_edge.baselines.cli import add_parser as add_central
+
+    add_central(sub)  # a baseline's central node as its own process
+
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument(
         "what",
         choices=[
+            "run",
             "memory",
             "memory-kill",
             "scale",
@@ -580,6 +585,7 @@ def build_parser() -> argparse.ArgumentParser:
             "security",
             "fuzz",
         ],
+        help="run: the benchmark (tasks x conditions x seeds; 'aeroweaver bench run --help')",
     )
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
     b.add_argument("--kills", type=int_in(1), default=200, help="memory-kill: SIGKILLs")
@@ -620,7 +626,36 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
+    """``[-v] bench run ...``: (verbose, the runner's own arguments), else None. The
+    benchmark runner has its own parser (its --seeds, --tasks, --rounds mean other things)."""
+    args = list(argv)
+    verbose = False
+    while args and args[0] in ("-v", "--verbose"):
+        verbose, args = True, args[1:]
+    if args[:2] == ["bench", "run"]:
+        return verbose, args[2:]
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    bench_run = _bench_run_args(sys.argv[1:] if argv is None else argv)
+    if bench_run is not None:
+        from aeroweaver_edge.bench import runner
+
+        verbose, rest = bench_run
+        logging.basicConfig(
+            level=logging.DEBUG if verbose else logging.WARNING,
+            format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+            stream=sys.stderr,
+        )
+        try:
+            return runner.main(rest)
+        except (KeyboardInterrupt, asyncio.CancelledError):
+            print("aeroweaver: bench stopped; rerun the same command to resume", file=sys.stderr)
+            return 130
+        except Exception as exc:
+            return report(exc, verbose=verbose)
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.WARNING,

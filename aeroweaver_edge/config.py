@@ -177,7 +177,9 @@ class LLMConfig(_Section):
 class AgentConfig(_Section):
     """The selector and its experience memory (paper defaults)."""
 
-    selector: Literal["llm", "scripted"] = "llm"
+    # llm: this UAV's own LLM; scripted: the task's reference policy; centralized / hmas2:
+    # a baseline's central node decides (aeroweaver_edge.baselines), the UAV still executes.
+    selector: Literal["llm", "scripted", "centralized", "hmas2"] = "llm"
     beta: float = Field(default=d.BETA, ge=0)
     gamma: float = Field(default=d.GAMMA, ge=0, le=1)
     neighbourhood: int = Field(default=d.NEIGHBOURHOOD, ge=1)
@@ -196,6 +198,12 @@ class AgentConfig(_Section):
     # The state text for experience retrieval holds received peer messages and the mission
     # context (role, goal, private facts) as in paper §3.3. False: pose and entities only.
     state_context: bool = True
+    # Send coordination reports (intent, target, status) to peers. False (an ablation):
+    # only task-required messages (goal, ciphertext) go out.
+    coordination_reports: bool = True
+    # Experience retrieval uses only finalised returns (trajectories that ended), not the
+    # in-flight ones of the current episode (agent.memory, docs/adaptation.md).
+    finalised_only: bool = False
 
     @field_validator("run_id")
     @classmethod

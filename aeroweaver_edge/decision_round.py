@@ -291,10 +291,13 @@ async def _decide_and_act(
     rc.memo.update(intent.memo)
 
     # 6. Talk: one send per message; "*" reaches every peer the routing rule lets it reach.
+    # Without coordination reports (an ablation) only task-required messages go out.
     sent: list[MsgRef] = []
     dropped = 0
     for m in intent.messages:
-        ref = await rc.link.send(m.to, m.kind, dict(m.body), round=tick.round)
+        if m.purpose == "coordination" and not rc.agent.coordination_reports:
+            continue
+        ref = await rc.link.send(m.to, m.kind, dict(m.body), round=tick.round, purpose=m.purpose)
         if ref is None:
             dropped += 1
         else:

@@ -23,6 +23,7 @@ from aeroweaver_edge.wire import (
     BROADCAST,
     HeaderFactory,
     InboxMessage,
+    MessagePurpose,
     MsgRef,
     ReplayFilter,
     StateBeacon,
@@ -111,7 +112,13 @@ class MemoryPeerChannel:
             self._hub.beacons[self.uav] = beacon
 
     async def send(
-        self, to: str, kind: str, body: Mapping[str, Scalar], *, round: int
+        self,
+        to: str,
+        kind: str,
+        body: Mapping[str, Scalar],
+        *,
+        round: int,
+        purpose: MessagePurpose = "coordination",
     ) -> MsgRef | None:
         reason: str | None = None
         if self._closed:
@@ -131,6 +138,7 @@ class MemoryPeerChannel:
             body=dict(body),
             sender_pos=self._own.pos,
             sender_role=self.inbox.role,
+            purpose=purpose,
         )
         self.stats.sent += 1
         self._hub._deliver(msg)

@@ -29,6 +29,7 @@ from .wire import (
     HeaderFactory,
     InboxMessage,
     Keys,
+    MessagePurpose,
     MsgRef,
     ReplayFilter,
     StateBeacon,
@@ -179,7 +180,15 @@ class PeerLink:
         self.inbox.note_position(round, pos)
         self._mesh.put(self._keys.state(self.uav), beacon)
 
-    async def send(self, to: str, kind: str, body: Body, *, round: int) -> MsgRef | None:
+    async def send(
+        self,
+        to: str,
+        kind: str,
+        body: Body,
+        *,
+        round: int,
+        purpose: MessagePurpose = "coordination",
+    ) -> MsgRef | None:
         """Send a message now; ``to="*"`` broadcasts. Never waits for a peer: whether it
         reaches anyone is judged by each receiver. None (counted) when it cannot be sent."""
         reason: str | None = None
@@ -198,6 +207,7 @@ class PeerLink:
                 body=dict(body),
                 sender_pos=self._own.pos,
                 sender_role=self.inbox.role,
+                purpose=purpose,
             )
             key = (
                 self._keys.broadcast(self.uav)

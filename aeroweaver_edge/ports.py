@@ -13,7 +13,7 @@ from typing import Protocol
 
 from aeroweaver_edge.observation import Observation, VehicleState
 from aeroweaver_edge.scores import LabelScores
-from aeroweaver_edge.wire import Entity, InboxMessage, MsgRef, Vec3
+from aeroweaver_edge.wire import Entity, InboxMessage, MessagePurpose, MsgRef, Vec3
 
 Scalar = str | int | float | bool
 
@@ -176,7 +176,13 @@ class PeerChannel(Protocol):
     ) -> list[InboxMessage]: ...
 
     async def send(
-        self, to: str, kind: str, body: Mapping[str, Scalar], *, round: int
+        self,
+        to: str,
+        kind: str,
+        body: Mapping[str, Scalar],
+        *,
+        round: int,
+        purpose: MessagePurpose = "coordination",
     ) -> MsgRef | None:
         """``None`` when the message could not be sent at all (closed, unknown peer)."""
         ...

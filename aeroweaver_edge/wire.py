@@ -57,6 +57,10 @@ class StateBeacon(msgspec.Struct, frozen=True, kw_only=True, tag="state"):
 BROADCAST: Final = "*"
 """``InboxMessage.to`` of a message for every peer it reaches."""
 
+MessagePurpose = Literal["task", "coordination"]
+"""Why a peer message exists: the task needs it (goal, ciphertext) or it only helps peers
+coordinate (intent, target, status reports)."""
+
 
 class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
     """A peer message (directed, or ``to="*"`` for every peer it reaches); enters the
@@ -72,6 +76,7 @@ class InboxMessage(msgspec.Struct, frozen=True, kw_only=True, tag="msg"):
     sender_pos: Vec3 | None = None
     sender_role: str = ""
     ttl_rounds: int = 8
+    purpose: MessagePurpose = "coordination"
 
 
 MAX_CAUSES: Final = 64
@@ -242,6 +247,49 @@ class SimEpisode(msgspec.Struct, frozen=True, kw_only=True, tag="episode"):
     reason: str = ""
 
 
+class CentralAsk(msgspec.Struct, frozen=True, kw_only=True, tag="ask"):
+    """One UAV -> a baseline's central node (DESIGN §12, "baselines are selectors"): what this
+    UAV perceived this round and its labelled options, so the central node can choose for it.
+    Only the essentials of the UAV's decision request; executors and the gate stay on the UAV."""
+
+    h: Header
+    uav: str
+    mission_id: str = ""
+    episode: int
+    round: int
+    role: str = ""
+    local_goal: str = ""
+    observation: str = ""  # the UAV's observation text (agent.describe)
+    messages: list[str] = []  # peer messages it received, one line each (prompt format)
+    options: list[str] = []  # "A. cover_landmark(target_id=L0)", in label order
+    deadline_s: float = 0.0  # the UAV's round budget: a later answer is of no use to it
+
+
+class CentralReview(msgspec.Struct, frozen=True, kw_only=True, tag="review"):
+    """One UAV -> the central node (HMAS-2): its local review of the proposed option."""
+
+    h: Header
+    uav: str
+    episode: int
+    round: int
+    agree: bool | None = None  # None: the review failed (no usable answer)
+    suggest: str | None = None  # the label it would rather take, if it disagrees
+    error: str | None = None
+
+
+class CentralAnswer(msgspec.Struct, frozen=True, kw_only=True, tag="central"):
+    """The central node -> one UAV: a proposal to review (HMAS-2) or the final choice."""
+
+    h: Header
+    uav: str
+    episode: int
+    round: int
+    phase: Literal["proposal", "final"] = "final"
+    label: str | None = None  # None: no valid choice for this UAV (it holds)
+    error: str | None = None  # set when no LLM answer came back at all (call failed)
+    reason: str = ""
+
+
 Payload = (
     StateBeacon
     | InboxMessage
@@ -253,6 +301,9 @@ Payload = (
     | SimReward
     | SimCommand
     | SimEpisode
+    | CentralAsk
+    | CentralReview
+    | CentralAnswer
 )
 
 
@@ -322,6 +373,22 @@ class Keys:
     @property
     def sim_episode(self) -> str:
         return self.sim("episode")
+
+    def ask(self, uav: str = "*") -> str:
+        """A UAV's request to a baseline's central node (under the UAV's own prefix)."""
+        return f"{self.root}/uav/{uav}/ask"
+
+    def review(self, uav: str = "*") -> str:
+        """A UAV's local review of the central proposal (HMAS-2; own prefix)."""
+        return f"{self.root}/uav/{uav}/review"
+
+    def central_answer(self, uav: str = "*") -> str:
+        """The central node's proposal or final choice for ``uav``."""
+        return f"{self.root}/central/answer/{uav}"
+
+    @property
+    def alive_central(self) -> str:
+        return f"{self.root}/alive/central"
 
 
 def last_chunk(key: str) -> str:

@@ -118,12 +118,27 @@ def activate(
     return out
 
 
+FLIGHT_TAG = "flight"
+"""Flight skills (take off, go to, orbit, land, return) are not task skills."""
+
+
+def full_catalogue(registry: SkillRegistry) -> tuple[str, ...]:
+    """Every task skill of the library (the paper's 22, ``hold_position`` last): what the
+    baselines and the "without skill activation" ablation get -- no role filter, no top-K."""
+    names = sorted(
+        n for n in registry.names() if n != HOLD and FLIGHT_TAG not in registry.get(n).doc.tags
+    )
+    return (*names, HOLD)
+
+
 __all__ = [
     "DEFAULT_CATALOGUE",
     "DEFAULT_K",
+    "FLIGHT_TAG",
     "HOLD",
     "activate",
     "condition_roles",
+    "full_catalogue",
     "pack",
     "role_allows",
     "task_catalogue",

@@ -328,6 +328,7 @@ class ExperienceMemory:
             cfg.memory_path,
             gamma=cfg.gamma,
             neighbourhood=cfg.neighbourhood,
+            finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
         )
@@ -1107,6 +1108,7 @@ class AsyncExperienceMemory:
             cfg.memory_path,
             gamma=cfg.gamma,
             neighbourhood=cfg.neighbourhood,
+            finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
         )

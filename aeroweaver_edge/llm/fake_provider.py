@@ -40,6 +40,7 @@ LabelStyle = Literal["plain", "space", "lower", "space_lower", "mixed"]
 UsageShape = Literal["openai", "deepseek", "llama"]
 Degenerate = Literal["none", "floors", "empty"]
 Tokenizer = Literal["single", "split", "absent"]
+JsonAnswers = Literal["schema", "garbage", "foreign_label", "refuse_schema"]
 
 _LABEL_LINE = re.compile(r"^\s*([A-Z])\.\s", re.MULTILINE)
 _DISTRACTORS = (
@@ -85,6 +86,11 @@ class Policy:
     model_error_status: int = 404  # 400 for providers that say "Model Not Exist" with 400
     max_prompt_chars: int | None = None  # 400 "maximum context length" beyond this
     echo_target: bool = False  # error bodies echo the request target (query included)
+    # Requests with ``response_format`` json_schema (the baselines' plans and reviews):
+    # "schema": a seeded object that fits the schema (enum values favour ``prefer``);
+    # "garbage": text that is no JSON; "foreign_label": every enum field gets "Z";
+    # "refuse_schema": 400 naming response_format (the client must retry without it).
+    json_answers: JsonAnswers = "schema"
 
 
 QUIRKS: dict[str, Policy] = {
@@ -417,6 +423,11 @@ class FakeProvider:
         if policy.bad_json:
             return _Answer(200, b"<html>gateway says hello</html>")
         prompt = _prompt_text(body["messages"])
+        fmt = body.get("response_format")
+        if isinstance(fmt, dict) and fmt.get("type") == "json_schema":
+            if policy.json_answers == "refuse_schema":
+                return _error(400, "response_format json_schema is not supported by this model")
+            return self._json_chat(policy, body, prompt, fmt)
         requested = int(body.get("top_logprobs") or 0)
         max_tokens = int(body.get("max_tokens") or 16)
         dist = _distribution(policy, prompt)
@@ -453,6 +464,39 @@ class FakeProvider:
             answer["timings"] = {"cache_n": cache_n, "prompt_n": prompt_n, "prompt_ms": 1.0,
                                  "prompt_per_second": 1000.0, "predicted_n": 1,
                                  "predicted_ms": 1.0, "predicted_per_second": 1000.0}  # fmt: skip
+        return _json(200, answer)
+
+    def _json_chat(
+        self, policy: Policy, body: dict[str, Any], prompt: str, fmt: dict[str, Any]
+    ) -> _Answer:
+        """A structured-output answer: an object that fits the request's schema."""
+        spec = fmt.get("json_schema")
+        schema = spec.get("schema") if isinstance(spec, dict) else None
+        digest = hashlib.sha256(f"{policy.seed}\x00json\x00{prompt}".encode()).digest()
+        rng = random.Random(int.from_bytes(digest[:8], "big"))
+        if policy.json_answers == "garbage":
+            content = "Sure! Here is my plan: uav0 goes first."
+        else:
+            value = _from_schema(schema if isinstance(schema, dict) else {}, rng, policy)
+            content = json.dumps(value, separators=(", ", ": "))
+        usage = self._usage(policy, prompt, body.get("id_slot"))
+        usage["completion_tokens"] = max(1, len(content) // 4)
+        usage["total_tokens"] = usage["prompt_tokens"] + usage["completion_tokens"]
+        answer = {
+            "id": f"chatcmpl-fake-{self.chat_calls}",
+            "object": "chat.completion",
+            "created": int(time.time()),
+            "model": body.get("model", self.model),
+            "choices": [
+                {
+                    "index": 0,
+                    "message": {"role": "assistant", "content": content},
+                    "logprobs": None,
+                    "finish_reason": "stop",
+                }
+            ],
+            "usage": usage,
+        }
         return _json(200, answer)
 
     def _slot(self, prompt: str, id_slot: object) -> tuple[int, int]:
@@ -499,6 +543,31 @@ class FakeProvider:
 
 
 # -------------------------------------------------------------------- the scripted model
+
+
+def _from_schema(schema: dict[str, Any], rng: random.Random, policy: Policy) -> Any:
+    """A value that fits ``schema`` (objects, enums, booleans, strings, numbers)."""
+    if "enum" in schema and isinstance(schema["enum"], list) and schema["enum"]:
+        if policy.json_answers == "foreign_label":
+            return "Z"
+        options = schema["enum"]
+        if policy.prefer in options and rng.random() < 0.7:
+            return policy.prefer
+        return rng.choice(options)
+    kind = schema.get("type")
+    if kind == "object":
+        props = schema.get("properties")
+        props = props if isinstance(props, dict) else {}
+        return {
+            k: _from_schema(v if isinstance(v, dict) else {}, rng, policy) for k, v in props.items()
+        }
+    if kind == "boolean":
+        return rng.random() < 0.7
+    if kind in ("integer", "number"):
+        return rng.randint(0, 3)
+    if kind == "array":
+        return []
+    return "ok"
 
 
 def _common_prefix(a: str, b: str) -> int:

@@ -24,11 +24,12 @@ HONESTY_NOTE: dict[Source, str] = {
 
 @contextlib.asynccontextmanager
 async def shared_llm(
-    llm: LLMConfig, *, needed: bool, n_parallel: int = 1
+    llm: LLMConfig, *, needed: bool, n_parallel: int = 1, slot_ctx: int | None = None
 ) -> AsyncIterator[tuple[LLMConfig, Source]]:
     """The endpoint every daemon (and the Commander) uses: ``llm`` when it names a URL, else
     the embedded server, started here and stopped on exit, with ``n_parallel`` cache slots
-    (one per UAV: each agent's prefix stays cached). ``needed=False``: no LLM at all."""
+    (one per UAV: each agent's prefix stays cached) of ``slot_ctx`` tokens each (None: the
+    server's default). ``needed=False``: no LLM at all."""
     if not needed:
         yield llm, "scripted"
         return
@@ -37,7 +38,8 @@ async def shared_llm(
         return
     from aeroweaver_edge.llm.embedded import EmbeddedServer
 
-    async with EmbeddedServer(n_parallel=max(1, n_parallel)) as server:
+    n = max(1, n_parallel)
+    async with EmbeddedServer(n_parallel=n, n_ctx=n * slot_ctx if slot_ctx else None) as server:
         yield (
             llm.model_copy(update={"base_url": server.base_url, "model": server.model}),
             "embedded",

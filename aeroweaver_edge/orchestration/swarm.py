@@ -47,7 +47,8 @@ from aeroweaver_edge.orchestration.network import free_port as free_port
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.orchestration.run_health import health_fields, security_fields
 from aeroweaver_edge.orchestration.trace import TraceRecorder
-from aeroweaver_edge.security.identity import COMMANDER, WORLD
+from aeroweaver_edge.orchestration.variants import WIDE_SLOT_CTX, add_central, with_full_catalogue
+from aeroweaver_edge.security.identity import CENTRAL, COMMANDER, WORLD
 from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
@@ -85,6 +86,14 @@ class SwarmOptions:
     trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
     secure: bool = True  # TLS (mutual) + ACL + signatures with per-run identities
     safety: SafetyConfig = field(default_factory=SafetyConfig)  # the daemons'; the world checks it
+    # Benchmark conditions (docs/benchmark.md): a baseline's central node chooses for every
+    # UAV (selector must be "llm"); "full" activation gives every UAV the whole task-skill
+    # catalogue (no role filter, no top-K); coordination=False sends task messages only.
+    baseline: Literal["none", "centralized", "hmas2"] = "none"
+    activation: Literal["topk", "full"] = "topk"
+    coordination: bool = True
+    central_gather_s: float = 3.0  # the central node waits this long for a round's asks
+    finalised_only: bool = False  # AgentConfig.finalised_only (retrieval of ended episodes)
 
 
 @dataclass
@@ -127,6 +136,8 @@ class RunSummary:
     link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
     security: dict[str, Any] = field(default_factory=dict)  # security_fields()
     envelope_violations: dict[str, Any] = field(default_factory=dict)  # sim/envelope.py
+    central: dict[str, Any] = field(default_factory=dict)  # a baseline's central node: totals
+    tokens_by_side: dict[str, dict[str, int]] = field(default_factory=dict)  # uavs / central
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -177,6 +188,8 @@ class RunSummary:
             "trace": self.trace,
             "security": self.security,
             **({"link": self.link} if self.link else {}),
+            **({"central": self.central} if self.central else {}),
+            **({"tokens_by_side": self.tokens_by_side} if self.tokens_by_side else {}),
         }
 
 
@@ -288,8 +301,15 @@ async def run_swarm(
         # One embedded-server cache slot per UAV we expect to fly (the plan is not made yet:
         # it may need the LLM); a larger mission shares slots round-robin.
         n_slots = opts.uavs or get_spec(opts.task or "coverage").team_size
+        central_slot = n_slots if opts.baseline != "none" else None  # its own cache slot
+        wide = opts.baseline != "none" or opts.activation == "full"  # 22 skill documents
         llm, source = await stack.enter_async_context(
-            shared_llm(opts.llm, needed=opts.selector == "llm", n_parallel=n_slots)
+            shared_llm(
+                opts.llm,
+                needed=opts.selector == "llm",
+                n_parallel=n_slots + (central_slot is not None),
+                slot_ctx=WIDE_SLOT_CTX if wide else None,
+            )
         )
         if plan_factory is not None:
             plan = await plan_factory(uav_ids(opts.uavs or 3))
@@ -302,6 +322,8 @@ async def run_swarm(
                 top_k=opts.top_k,
                 mission_id=None if opts.mission_text else f"{opts.task or 'coverage'}-s{opts.seed}",
             )
+        if opts.activation == "full":
+            plan = with_full_catalogue(plan)
         task = world_task(plan, opts.max_rounds)
         uavs = task.uav_ids
         summary = RunSummary(
@@ -316,11 +338,15 @@ async def run_swarm(
             note=HONESTY_NOTE[source],
             run_id=new_run_id(),  # one per run: its records never collide with another run's
         )
+        if opts.baseline != "none" and opts.selector != "llm":
+            raise RunFailed(f"the {opts.baseline} baseline needs an LLM (selector llm)")
         if opts.selector == "llm":
             summary.model = llm.model
             verdict = await probe(llm)
             summary.probe, summary.probe_kind = verdict.line(), verdict.kind
             summary.selector = f"llm:{llm.model}"
+            if opts.baseline != "none":
+                summary.selector = f"central:{opts.baseline}:{llm.model}"
         else:
             summary.selector = "scripted:reference"
         sim_cfg = SimConfig(
@@ -389,6 +415,21 @@ async def run_swarm(
 
         pin_slots = source == "embedded" if opts.slots is None else opts.slots
         pin_slots = pin_slots and source != "scripted"
+        central = None
+        if opts.baseline != "none":
+            from aeroweaver_edge.baselines.wiring import open_central
+
+            central_llm = llm.model_copy(update={"slot": central_slot}) if pin_slots else llm
+            central = await stack.enter_async_context(
+                open_central(
+                    opts.baseline,
+                    net.config(CENTRAL),
+                    opts.swarm,
+                    central_llm,
+                    gather_s=opts.central_gather_s,
+                    on_round=recorder.on_central if recorder is not None else None,
+                )
+            )
         configs = [
             UavConfig(
                 uav=u,
@@ -396,7 +437,7 @@ async def run_swarm(
                 mesh=net.config(u),
                 llm=llm.model_copy(update={"slot": i % n_slots}) if pin_slots else llm,
                 agent=AgentConfig(
-                    selector=opts.selector,
+                    selector=opts.selector if opts.baseline == "none" else opts.baseline,
                     beta=opts.beta,
                     gamma=opts.gamma,
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
@@ -404,6 +445,8 @@ async def run_swarm(
                     share_experience=opts.share_experience,
                     history_rounds=opts.history_rounds,
                     state_context=opts.state_context,
+                    coordination_reports=opts.coordination,
+                    finalised_only=opts.finalised_only,
                 ),
                 safety=opts.safety,
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
@@ -486,6 +529,9 @@ async def run_swarm(
         summary.tokens_per_decision = _per_decision(prompt, cached, completion, summary.llm_calls)
         for e in summary.episodes:
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
+        if central is not None:  # counted where spent: the UAVs' (local) and the central node's
+            summary.central = central.totals()
+            add_central(summary, summary.central)
         summary.tokens_by_agent = {
             u: p.prompt_tokens + p.completion_tokens
             for u, p in sorted(board.uavs.items(), key=lambda kv: natural(kv[0]))

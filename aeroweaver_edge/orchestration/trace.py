@@ -79,6 +79,7 @@ class TraceRecorder:
         self._rounds: list[dict[str, Any]] = []
         self._episodes: list[dict[str, Any]] = []
         self._decisions: dict[tuple[int, int, str], dict[str, Any]] = {}
+        self._central: dict[tuple[int, int], dict[str, Any]] = {}
 
     def on_round(self, log: RoundLog) -> None:
         cmds = {
@@ -114,6 +115,11 @@ class TraceRecorder:
         if rep.phase == "round":
             self._decisions[(rep.episode, rep.round, rep.uav)] = _decision(rep)
 
+    def on_central(self, record: Any) -> None:
+        """A baseline's central node finished a round (``baselines.central.CentralRound``):
+        its calls, tokens, proposals, reviews and final letters join that round's line."""
+        self._central[(record.episode, record.round)] = record.as_dict()
+
     def on_episode(self, episode: int, result: EpisodeResult) -> None:
         self._episodes.append(
             {
@@ -138,7 +144,11 @@ class TraceRecorder:
             if episode is not None and row["episode"] != episode and episode in ends:
                 out.append(ends.pop(episode))
             episode = row["episode"]
-            out.append({**row, "decisions": by_round.get((row["episode"], row["round"]), {})})
+            where = (row["episode"], row["round"])
+            line = {**row, "decisions": by_round.get(where, {})}
+            if where in self._central:
+                line["central"] = self._central[where]
+            out.append(line)
         out.extend(ends[e] for e in sorted(ends))
         return out
 

@@ -33,4 +33,6 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     if key is None or not allowed(ctx, ROLES):
         return HOLD
     body: dict[str, Scalar] = {"skill": NAME, "ciphertext": params.symbol ^ key}
-    return Intent(Hold(), messages=(Outgoing(to="*", kind="ciphertext", body=body),))
+    return Intent(
+        Hold(), messages=(Outgoing(to="*", kind="ciphertext", body=body, purpose="task"),)
+    )

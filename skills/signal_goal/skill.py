@@ -33,4 +33,4 @@ def execute(params: Params, obs: Observation, ctx: SkillContext) -> Intent:
     landmark = visible(obs, params.target_id, "landmark")
     if landmark is not None:
         body["north"], body["east"] = metres(landmark.pos[0]), metres(landmark.pos[1])
-    return Intent(Hold(), messages=(Outgoing(to="*", kind="goal", body=body),))
+    return Intent(Hold(), messages=(Outgoing(to="*", kind="goal", body=body, purpose="task"),))

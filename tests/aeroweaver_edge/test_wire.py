@@ -16,6 +16,9 @@ from aeroweaver_edge.wire import (
     MAX_PAYLOAD_BYTES,
     SCHEMA_VERSION,
     Assignment,
+    CentralAnswer,
+    CentralAsk,
+    CentralReview,
     Codec,
     DecodeStats,
     Entity,
@@ -153,6 +156,21 @@ SAMPLES: list[msgspec.Struct] = [
         sent=[MsgRef(sender="uav1", seq=4, to="uav2")],
     ),
     SimEpisode(h=H, episode=0, task="coverage", phase="end", reason="complete"),
+    CentralAsk(
+        h=H,
+        uav="uav1",
+        mission_id="m1",
+        episode=0,
+        round=2,
+        role="searcher",
+        local_goal="cover a landmark",
+        observation="you: north 0 east 0",
+        messages=["uav2 intent r1: skill=cover_landmark"],
+        options=["A. cover_landmark(target_id=L0)", "B. hold_position()"],
+        deadline_s=10.0,
+    ),
+    CentralReview(h=H, uav="uav1", episode=0, round=2, agree=False, suggest="B"),
+    CentralAnswer(h=H, uav="uav1", episode=0, round=2, phase="final", label="A", reason="plan"),
 ]
 
 

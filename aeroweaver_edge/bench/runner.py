@@ -1,0 +1,436 @@
+"""``aeroweaver bench run``: tasks x conditions x seeds, resumable, with tables and plots.
+
+Every cell (task, condition, seed) is one simulated run of ``--episodes`` consecutive
+episodes (experience memory persists across them) that writes, under ``--out``:
+
+* ``runs/<task>/<condition>/seed<S>.trace.jsonl`` -- the per-round trace (docs/traces.md);
+* ``runs/<task>/<condition>/seed<S>.json`` -- the run summary, the per-episode figures
+  computed from the trace (``bench.episodes``) and a check that they add up to the summary.
+
+A cell whose JSON exists and is complete (same configuration) is skipped, so an interrupted
+run resumes with the same command. At the end (and with ``--report-only``) ``results.csv``,
+``table.md``, ``returns.png`` and ``tokens.png`` are written from all complete cells.
+Progress and an ETA go to stderr; the machine's load is recorded at start and end of every
+session in ``manifest.json``.
+
+``--quick`` (CI): all nine tasks, all conditions, one seed, 2 rounds, the fake provider (a
+real loopback HTTP server that also answers the baselines' JSON requests).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import os
+import platform
+import shlex
+import sys
+import tempfile
+import time
+from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from aeroweaver_edge.bench.conditions import CONDITIONS, Condition, swarm_options
+from aeroweaver_edge.bench.episodes import check_against_summary, episode_metrics, read_trace
+from aeroweaver_edge.cli_checks import check_api_key_env, check_llm_url, finite, int_in
+from aeroweaver_edge.cli_errors import ArgumentParser
+from aeroweaver_edge.config import LLMConfig, parse_config
+from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.json_out import write_json_file
+from aeroweaver_edge.tasks import TASK_NAMES
+
+RESULT_VERSION = 1
+DEFAULT_LLM_DEADLINE_S = 60.0
+
+
+@dataclass(frozen=True)
+class Cell:
+    task: str
+    condition: str
+    seed: int
+
+    def stem(self, out: Path) -> Path:
+        return out / "runs" / self.task / self.condition / f"seed{self.seed}"
+
+    def json_path(self, out: Path) -> Path:
+        return self.stem(out).with_suffix(".json")
+
+    def trace_path(self, out: Path) -> Path:
+        return self.stem(out).with_suffix(".trace.jsonl")
+
+    def __str__(self) -> str:
+        return f"{self.task} / {self.condition} / seed {self.seed}"
+
+
+def plan_cells(tasks: Sequence[str], conditions: Sequence[str], seeds: Sequence[int]) -> list[Cell]:
+    """Seed-major: a complete first seed of every task and condition comes first, so an
+    interrupted long run still has every cell of the table."""
+    return [Cell(t, c, s) for s in seeds for t in tasks for c in conditions]
+
+
+def config_key(rounds: int, episodes: int, llm: LLMConfig, source: str) -> dict[str, Any]:
+    """What must match for a stored cell to count as done."""
+    return {
+        "version": RESULT_VERSION,
+        "rounds": rounds,
+        "episodes": episodes,
+        "llm": source,
+        "model": llm.model,
+    }
+
+
+def load_done(path: Path, key: dict[str, Any], cond: Condition) -> dict[str, Any] | None:
+    """The stored result if it is complete and of this configuration; None: run it. A
+    result of another configuration is an error (nothing is overwritten)."""
+    import json
+
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None  # half written or damaged: run the cell again
+    if not isinstance(data, dict) or not data.get("bench", {}).get("complete"):
+        return None
+    stored = data["bench"].get("config", {})
+    mine = dict(key)
+    if cond.selector == "scripted":  # the reference row does not depend on the endpoint
+        stored = {k: v for k, v in stored.items() if k not in ("llm", "model")}
+        mine = {k: v for k, v in mine.items() if k not in ("llm", "model")}
+    if stored != mine:
+        raise UserError(
+            f"{path} holds a result of another configuration ({stored} vs {mine})",
+            "use another --out directory, or delete that directory's runs",
+        )
+    return data
+
+
+def _load() -> list[float]:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return []
+
+
+def _fmt_s(seconds: float) -> str:
+    seconds = int(max(0, seconds))
+    return f"{seconds // 3600}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}"
+
+
+class Progress:
+    """One stderr line per cell with a bar and an ETA from the cells timed so far (per
+    condition: a baseline's cell takes several times an AeroWeaver cell)."""
+
+    def __init__(self, total: int, skipped: int) -> None:
+        self.total = total
+        self.done = skipped
+        self.started = time.monotonic()
+        self.times: dict[str, list[float]] = {}
+
+    def eta(self, remaining: Sequence[Cell]) -> float | None:
+        all_times = [t for ts in self.times.values() for t in ts]
+        if not all_times:
+            return None
+        overall = sum(all_times) / len(all_times)
+        est = 0.0
+        for c in remaining:
+            ts = self.times.get(c.condition)
+            est += sum(ts) / len(ts) if ts else overall
+        return est
+
+    def line(self, cell: Cell, seconds: float, outcome: str, remaining: Sequence[Cell]) -> str:
+        self.done += 1
+        self.times.setdefault(cell.condition, []).append(seconds)
+        width = 24
+        filled = int(width * self.done / max(1, self.total))
+        eta = self.eta(remaining)
+        return (
+            f"[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} "
+            f"{cell}: {outcome} in {seconds:.1f} s | elapsed "
+            f"{_fmt_s(time.monotonic() - self.started)}, ETA "
+            f"{_fmt_s(eta) if eta is not None else '?'}"
+        )
+
+
+@contextlib.asynccontextmanager
+async def endpoint(args: argparse.Namespace) -> AsyncIterator[tuple[LLMConfig, str]]:
+    """(LLM config, source name): the fake provider (--quick), a URL, or the embedded model
+    (started per run by the orchestration, with one cache slot per UAV)."""
+    deadline = args.llm_deadline or (10.0 if args.quick else DEFAULT_LLM_DEADLINE_S)
+    if args.quick and not args.llm:
+        from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
+
+        async with FakeProvider(Policy(prefer="A"), n_slots=8) as fp:
+            cfg = LLMConfig(base_url=fp.base_url, model=fp.model, deadline_s=deadline)
+            yield cfg, "fake"
+        return
+    fields: dict[str, Any] = {"base_url": args.llm, "deadline_s": deadline}
+    if args.model:
+        fields["model"] = args.model
+    if args.api_key_env:
+        fields["api_key_env"] = args.api_key_env
+    cfg = parse_config(fields, LLMConfig, "LLM flags")
+    yield cfg, (args.llm if args.llm else "embedded")
+
+
+async def run_cell(
+    cell: Cell, args: argparse.Namespace, llm: LLMConfig, key: dict[str, Any]
+) -> dict[str, Any]:
+    from aeroweaver_edge.orchestration.swarm import run_swarm
+
+    out = Path(args.out)
+    cond = CONDITIONS[cell.condition]
+    trace = cell.trace_path(out)
+    trace.parent.mkdir(parents=True, exist_ok=True)
+    load_before = _load()
+    started = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="aw-bench-mem-") as mem:
+        opts = swarm_options(
+            cond,
+            task=cell.task,
+            seed=cell.seed,
+            episodes=args.episodes,
+            rounds=args.rounds,
+            llm=llm,
+            deadline_s=args.deadline,
+            trace_path=trace,
+            memory_dir=Path(mem),
+        )
+        summary = (await run_swarm(opts)).as_dict()
+    wall = time.monotonic() - started
+    episodes = episode_metrics(read_trace(trace))
+    data = {
+        "bench": {
+            "task": cell.task,
+            "condition": cell.condition,
+            "title": cond.title,
+            "seed": cell.seed,
+            "config": key,
+            "deadline_s": opts.deadline_s,
+            "llm_deadline_s": llm.deadline_s,
+            "finished": datetime.now(UTC).isoformat(timespec="seconds"),
+            "wall_s": round(wall, 2),
+            "load_before": load_before,
+            "load_after": _load(),
+            "trace": str(trace.relative_to(out)),
+            "trace_check": check_against_summary(episodes, summary),
+            "complete": True,
+        },
+        "episodes": episodes,
+        "summary": summary,
+    }
+    write_json_file(cell.json_path(out), data)
+    return data
+
+
+def _outcome(data: dict[str, Any]) -> str:
+    rets = [e["team_return"] for e in data["episodes"]]
+    shown = ", ".join("n/a" if r is None else f"{r:.2f}" for r in rets)
+    problems = data["bench"]["trace_check"]
+    return f"return {shown}" + (f" (trace mismatch: {problems})" if problems else "")
+
+
+def _record_session(out: Path, entry: dict[str, Any]) -> None:
+    import json
+
+    path = out / "manifest.json"
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
+    except ValueError:
+        manifest = {}
+    manifest.setdefault("sessions", []).append(entry)
+    write_json_file(path, manifest)
+
+
+async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
+    out = Path(args.out)
+    failures: list[str] = []
+    async with endpoint(args) as (llm, source):
+        key = config_key(args.rounds, args.episodes, llm, source)
+        todo = [
+            c for c in cells if load_done(c.json_path(out), key, CONDITIONS[c.condition]) is None
+        ]
+        session = {
+            "command": "aeroweaver bench run " + " ".join(shlex.quote(a) for a in args.argv),
+            "started": datetime.now(UTC).isoformat(timespec="seconds"),
+            "load_start": _load(),
+            "machine": {
+                "cpus": os.cpu_count(),
+                "platform": platform.platform(),
+                "python": platform.python_version(),
+            },
+            "llm": source,
+            "model": llm.model,
+            "llm_deadline_s": llm.deadline_s,
+            "cells_planned": len(cells),
+            "cells_skipped": len(cells) - len(todo),
+        }
+        progress = Progress(len(cells), len(cells) - len(todo))
+        print(
+            f"bench: {len(cells)} cells, {len(cells) - len(todo)} already done, "
+            f"{len(todo)} to run; LLM: {source} ({llm.model}); results in {out}",
+            file=sys.stderr,
+            flush=True,
+        )
+        ran = 0
+        try:
+            for i, cell in enumerate(todo):
+                t0 = time.monotonic()
+                try:
+                    data = await run_cell(cell, args, llm, key)
+                    outcome = _outcome(data)
+                    ran += 1
+                except (asyncio.CancelledError, KeyboardInterrupt):
+                    raise
+                except Exception as exc:  # one cell failing must not lose the others
+                    from aeroweaver_edge.cli_errors import one_line
+
+                    outcome = f"FAILED: {one_line(f'{type(exc).__name__}: {exc}')[:300]}"
+                    failures.append(f"{cell}: {outcome}")
+                line = progress.line(cell, time.monotonic() - t0, outcome, todo[i + 1 :])
+                print(line, file=sys.stderr, flush=True)
+        finally:
+            session.update(
+                finished=datetime.now(UTC).isoformat(timespec="seconds"),
+                load_end=_load(),
+                cells_run=ran,
+                failures=failures,
+            )
+            _record_session(out, session)
+    from aeroweaver_edge.bench.report import write_report
+
+    write_report(out, tasks=args.tasks, conditions=args.conditions)
+    print(f"bench: report written to {out / 'table.md'}", file=sys.stderr)
+    if failures:
+        print(
+            f"bench: {len(failures)} cell(s) failed; rerun the same command to retry them:",
+            file=sys.stderr,
+        )
+        for f in failures:
+            print(f"  {f}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = ArgumentParser(
+        prog="aeroweaver bench run",
+        description="Tasks x conditions x seeds: per-episode JSON + traces, a CSV, a "
+        "Markdown table and plots; resumable (finished cells are skipped).",
+    )
+    p.add_argument(
+        "--tasks",
+        nargs="+",
+        choices=TASK_NAMES,
+        default=None,
+        metavar="TASK",
+        help=f"default: all ({', '.join(TASK_NAMES)})",
+    )
+    p.add_argument(
+        "--conditions",
+        nargs="+",
+        choices=list(CONDITIONS),
+        default=None,
+        metavar="COND",
+        help=f"default: all ({', '.join(CONDITIONS)})",
+    )
+    p.add_argument("--seeds", type=int_in(1, 1000), default=3, help="seeds 1..N (default 3)")
+    p.add_argument("--first-seed", type=int_in(0), default=1, help="seeds start here")
+    p.add_argument(
+        "--episodes",
+        type=int_in(1, 1000),
+        default=1,
+        help="consecutive episodes per seed, memory kept (default 1)",
+    )
+    p.add_argument(
+        "--rounds",
+        type=int_in(1, 1000),
+        default=None,
+        help="episode horizon (default 24; 2 with --quick)",
+    )
+    p.add_argument(
+        "--llm",
+        metavar="URL",
+        help="OpenAI-compatible base URL "
+        "(default: the embedded SmolLM2-135M; --quick: the fake provider)",
+    )
+    p.add_argument("--model", help="model name at that endpoint")
+    p.add_argument("--api-key-env", help="environment variable holding the API key")
+    p.add_argument(
+        "--llm-deadline",
+        type=finite(),
+        default=None,
+        help=f"seconds per LLM call (default {DEFAULT_LLM_DEADLINE_S:g})",
+    )
+    p.add_argument(
+        "--deadline",
+        type=finite(),
+        default=None,
+        help="seconds per round (default: from the LLM deadline and the "
+        "condition's sequential calls)",
+    )
+    p.add_argument("--out", default="bench-results", help="output directory")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="CI: every task and condition, 1 seed, 2 rounds, the fake LLM",
+    )
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="only rebuild table, CSV and plots from the finished cells",
+    )
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(argv)
+    args.argv = argv
+    args.tasks = args.tasks or list(TASK_NAMES)
+    args.conditions = args.conditions or list(CONDITIONS)
+    if args.quick:
+        args.seeds = 1 if "--seeds" not in argv else args.seeds
+        args.rounds = args.rounds or 2
+    args.rounds = args.rounds or 24
+    if args.llm:
+        check_llm_url(args.llm)
+    check_api_key_env(args.api_key_env)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {out} is not a directory", "give --out a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    if not os.access(out, os.W_OK):
+        raise UserError(f"--out {out} is not writable", "give --out a writable directory")
+    if args.report_only:
+        from aeroweaver_edge.bench.report import write_report
+
+        write_report(out, tasks=args.tasks, conditions=args.conditions)
+        print(f"report written to {out / 'table.md'}", file=sys.stderr)
+        return 0
+    seeds = list(range(args.first_seed, args.first_seed + args.seeds))
+    cells = plan_cells(args.tasks, args.conditions, seeds)
+    return asyncio.run(_cancellable(run_all(args, cells)))
+
+
+async def _cancellable(coro: Any) -> int:
+    """SIGTERM / SIGINT cancel the run, so every session and server is closed on the way
+    out; finished cells are kept and the same command resumes."""
+    import signal
+
+    task = asyncio.ensure_future(coro)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, task.cancel)
+    try:
+        return int(await task)
+    finally:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.remove_signal_handler(sig)
+
+
+__all__ = ["Cell", "build_parser", "config_key", "load_done", "main", "plan_cells"]

@@ -1,0 +1,133 @@
+"""``aeroweaver bench run``: cells written with their traces, resumed, refused when the
+directory holds another configuration; tables computed from the per-episode figures."""
+
+from __future__ import annotations
+
+import json
+import statistics
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from aeroweaver_edge.bench.report import aggregate, markdown
+from aeroweaver_edge.bench.runner import Cell, plan_cells
+from aeroweaver_edge.cli import main
+
+CONDS = ["aeroweaver", "centralized", "scripted"]
+
+
+def quick(out: Path, *extra: str) -> int:
+    return main(
+        [
+            "bench",
+            "run",
+            "--quick",
+            "--tasks",
+            "coverage",
+            "--conditions",
+            *CONDS,
+            "--out",
+            str(out),
+            *extra,
+        ]
+    )
+
+
+def test_plan_is_seed_major() -> None:
+    cells = plan_cells(["a", "b"], ["x", "y"], [1, 2])
+    first = [Cell("a", "x", 1), Cell("a", "y", 1), Cell("b", "x", 1), Cell("b", "y", 1)]
+    assert cells[:4] == first
+    assert len(cells) == 8
+
+
+def test_quick_run_writes_cells_tables_and_resumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bench"
+    assert quick(out) == 0
+    err = capsys.readouterr().err
+    assert "3 cells, 0 already done, 3 to run" in err
+    assert "ETA" in err
+    for c in CONDS:
+        data = json.loads((out / "runs" / "coverage" / c / "seed1.json").read_text())
+        assert data["bench"]["complete"]
+        assert data["bench"]["trace_check"] == []
+        assert data["bench"]["config"]["rounds"] == 2
+        assert (out / data["bench"]["trace"]).is_file()
+        assert [e["rounds"] for e in data["episodes"]] == [2]
+    rows = (out / "results.csv").read_text().splitlines()
+    assert len(rows) == 1 + 3
+    assert rows[0].startswith("task,condition,seed,episode,team_return")
+    table = (out / "table.md").read_text()
+    assert "| coverage |" in table
+    assert "AeroWeaver / Centralized" in table
+    assert (out / "returns.png").stat().st_size > 1000
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["sessions"][0]["cells_run"] == 3
+    assert manifest["sessions"][0]["load_start"]
+
+    # resume: nothing to run; a damaged cell is run again, the others are kept
+    cell = out / "runs" / "coverage" / "centralized" / "seed1.json"
+    cell.write_text('{"bench": {"complete": tr')
+    kept = (out / "runs" / "coverage" / "aeroweaver" / "seed1.json").read_text()
+    assert quick(out) == 0
+    assert "3 cells, 2 already done, 1 to run" in capsys.readouterr().err
+    assert json.loads(cell.read_text())["bench"]["complete"] is True
+    assert (out / "runs" / "coverage" / "aeroweaver" / "seed1.json").read_text() == kept
+
+    # another configuration in the same directory: refused, nothing overwritten
+    assert quick(out, "--rounds", "3") == 2
+    err = capsys.readouterr().err
+    assert "another configuration" in err
+    assert err.count("\n") == 1
+    assert (out / "runs" / "coverage" / "aeroweaver" / "seed1.json").read_text() == kept
+
+
+def cell(task: str, cond: str, seed: int, returns: list[float], tokens: int) -> dict[str, Any]:
+    eps = []
+    for i, r in enumerate(returns):
+        eps.append(
+            {
+                "episode": i,
+                "team_return": r,
+                "rounds": 2,
+                "reason": "horizon",
+                "decisions": 4,
+                "holds": 1,
+                "holds_by_cause": {"chosen": 1},
+                "invalid": 0,
+                "llm_calls": {"uavs": 4, "central": 0},
+                "llm_calls_total": 4,
+                "tokens": {
+                    "uavs": {"prompt": tokens, "prompt_cached": 0, "completion": 0},
+                    "central": {"prompt": 0, "prompt_cached": 0, "completion": 0},
+                },
+                "tokens_total": tokens,
+                "latency_s": [0.1, 0.2, 0.3, 0.4],
+            }
+        )
+    return {
+        "bench": {"task": task, "condition": cond, "title": cond, "seed": seed},
+        "episodes": eps,
+        "summary": {"model": "m"},
+    }
+
+
+def test_tables_from_episode_figures() -> None:
+    cells = [
+        cell("coverage", "aeroweaver", 1, [-10.0], 100),
+        cell("coverage", "aeroweaver", 2, [-14.0], 300),
+        cell("coverage", "hmas2", 1, [-20.0], 1000),
+        cell("coverage", "no_activation", 1, [-29.077], 100),
+    ]
+    stats = aggregate(cells)
+    s = stats[("coverage", "aeroweaver")]
+    assert s.returns == [-10.0, -14.0]
+    assert s.sd == pytest.approx(statistics.stdev([-10, -14]))
+    assert s.percentile(0.5) == 0.3
+    assert s.uncached_per_call == 400 / 8
+    md = markdown(stats, ["coverage"], ["aeroweaver", "hmas2", "no_activation"])
+    assert "| coverage | -12.00 ± 2.83 (n=2) | -20.00 (n=1) | -29.08 (n=1) |" in md
+    assert "| coverage | 0.20 | – |" in md  # tokens 200 / 1000; no centralized cell
+    assert "| coverage | 0.000 |" in md  # Q = 1 + (-29.077 + 12) / 17.077 (the paper's K_t)
