@@ -355,6 +355,9 @@ class SimConfig(_Section):
     altitude_m: float = Field(default=d.ALTITUDE_M, gt=0)
     max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0)
     max_accel_mps2: float = Field(default=d.MAX_ACCEL_MPS2, gt=0)
+    # Wall-clock floor per round (0: as fast as the daemons decide). The console sets the
+    # paper's 0.5 s so a scripted run can be watched; results do not depend on it.
+    pace_s: float = Field(default=0.0, ge=0, le=60)
 
 
 class ConfigError(UserError):

@@ -21,7 +21,7 @@ import uuid
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.agent.memory import new_run_id
@@ -41,6 +41,8 @@ from aeroweaver_edge.tasks.base import TaskDefinition
 from commander.commander import Commander
 from commander.plan import MissionPlan
 from commander.progress import ProgressBoard
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,7 @@ class SwarmOptions:
     history_rounds: int = d.HISTORY_ROUNDS  # AgentConfig.history_rounds (0: no history)
     state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
     trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
+    pace_s: float = 0.0  # wall-clock floor per round (the console: watchable scripted runs)
 
 
 @dataclass
@@ -108,6 +111,7 @@ class RunSummary:
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
     link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
+    stopped: str | None = None  # the operator's stop (console, MCP), if the run ended so
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -156,6 +160,7 @@ class RunSummary:
             "note": self.note,
             "trace": self.trace,
             **({"link": self.link} if self.link else {}),
+            **({"stopped": self.stopped} if self.stopped else {}),
         }
 
 
@@ -253,6 +258,34 @@ def _trace_header(summary: RunSummary, opts: SwarmOptions, cfg: SimConfig) -> di
     }
 
 
+@dataclass(frozen=True)
+class SwarmHandle:
+    """What an observer or operator next to a running swarm needs (``aeroweaver sim
+    --console``): the swarm, its Commander, and the mesh settings for an identity of this
+    run (``"observer"``, ``"operator"``); on plain loopback every identity gets the same."""
+
+    swarm: str
+    commander: Commander
+    mesh_for: Callable[[str], MeshConfig]
+
+
+async def until_stopped(work: Awaitable[T], commander: Commander) -> T | None:
+    """``work``'s result, or None (``work`` cancelled) once the Commander's mission ended
+    by an operator stop: the world stops flying rounds for a mission nobody flies."""
+    job = asyncio.ensure_future(work)
+    stop = asyncio.ensure_future(commander.ended.wait())
+    try:
+        await asyncio.wait({job, stop}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        stop.cancel()
+    if job.done():
+        return job.result()
+    job.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await job
+    return None
+
+
 def world_task(plan: MissionPlan, max_rounds: int) -> TaskDefinition:
     """The task definition the world flies for ``plan``: its task, its UAVs and roles."""
     roles = {u: plan.assignments[u].role for u in sorted(plan.assignments, key=natural)}
@@ -266,6 +299,7 @@ async def run_swarm(
     plan_factory: Callable[[list[str]], Awaitable[MissionPlan]] | None = None,
     fault: Callable[[RoundLog, DaemonSet], Awaitable[None]] | None = None,
     on_commander: Callable[[Commander], None] | None = None,
+    on_started: Callable[[SwarmHandle], Awaitable[None]] | None = None,
 ) -> RunSummary:
     started = time.monotonic()
     async with contextlib.AsyncExitStack() as stack:
@@ -313,6 +347,7 @@ async def run_swarm(
             seed=opts.seed,
             max_rounds=opts.max_rounds,
             deadline_s=opts.deadline_s,
+            pace_s=opts.pace_s,
         )
         namespace = f"aw-{uuid.uuid4().hex[:10]}"
         seed_mesh_cfg, peer_mesh_cfg = mesh_configs(namespace)
@@ -361,6 +396,8 @@ async def run_swarm(
         stack.push_async_callback(commander.aclose)
         if on_commander is not None:
             on_commander(commander)
+        if on_started is not None:  # observers join before the first round
+            await on_started(SwarmHandle(opts.swarm, commander, lambda _name: peer_mesh_cfg))
 
         pin_slots = source == "embedded" if opts.slots is None else opts.slots
         pin_slots = pin_slots and source != "scripted"
@@ -401,7 +438,10 @@ async def run_swarm(
 
         try:
             for ep in range(opts.episodes):
-                result = await runner.run_episode(ep)
+                result = await until_stopped(runner.run_episode(ep), commander)
+                if result is None:  # an operator stopped the mission (console, MCP)
+                    summary.stopped = commander.end_reason
+                    break
                 summary.episodes.append(_episode_dict(ep, result, task))
                 if recorder is not None:
                     recorder.on_episode(ep, result)
@@ -487,4 +527,13 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else text
 
 
-__all__ = ["RunSummary", "SwarmOptions", "percentiles", "run_swarm", "world_task", "write_json"]
+__all__ = [
+    "RunSummary",
+    "SwarmHandle",
+    "SwarmOptions",
+    "percentiles",
+    "run_swarm",
+    "until_stopped",
+    "world_task",
+    "write_json",
+]
