@@ -25,7 +25,14 @@ from typing import Any, Literal, TypeVar
 
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.agent.memory import new_run_id
-from aeroweaver_edge.config import AgentConfig, LLMConfig, MeshConfig, SimConfig, UavConfig
+from aeroweaver_edge.config import (
+    AgentConfig,
+    ApprovalConfig,
+    LLMConfig,
+    MeshConfig,
+    SimConfig,
+    UavConfig,
+)
 from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
@@ -71,6 +78,7 @@ class SwarmOptions:
     state_context: bool = True  # AgentConfig.state_context (False: pose and entities only)
     trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
     pace_s: float = 0.0  # wall-clock floor per round (the console: watchable scripted runs)
+    approval: Literal["normal", "strict"] = "normal"  # daemons' [approval] level
 
 
 @dataclass
@@ -417,6 +425,7 @@ async def run_swarm(
                     history_rounds=opts.history_rounds,
                     state_context=opts.state_context,
                 ),
+                approval=ApprovalConfig(level=opts.approval),
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
             for i, u in enumerate(uavs)
