@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 from aeroweaver_edge.approval import ApprovalGate
 from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.wire import Approval, ApprovalStatus, HeaderFactory, Keys, ReplayFilter
+from aeroweaver_edge.wire import Approval, ApprovalStatus, HeaderFactory, Keys
 
 if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh, Subscription
@@ -33,7 +33,6 @@ class ApprovalLink:
         self.uav = uav
         self.headers = headers
         self.gate = gate
-        self.replays = ReplayFilter()
         self._tasks: list[asyncio.Task[None]] = []
         self._dirty = False
 
@@ -61,9 +60,8 @@ class ApprovalLink:
 
     async def _pump(self, sub: Subscription[Approval]) -> None:
         async for _key, msg in sub:
-            if not self.replays.accept(msg.h, authenticated=self.mesh.authenticated):
-                log.warning("%s: replayed approval %s dropped", self.uav, msg.id)
-                continue
+            # Each approval id counts once (the gate remembers them), and a stale one expired
+            # in transit, so a replayed payload grants nothing new.
             rec = self.gate.receive(msg)
             self._dirty = False
             self._publish(rec.id)

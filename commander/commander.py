@@ -23,7 +23,6 @@ from aeroweaver_edge.wire import (
     MissionContext,
     OperatorCommand,
     ProgressReport,
-    ReplayFilter,
 )
 from commander.activation import HOLD
 from commander.plan import MissionPlan, UavAssignment
@@ -65,7 +64,7 @@ class Commander:
         self.ended = asyncio.Event()  # set when the mission ends (operator stop or the run)
         self.end_reason = ""
         self.operator_log: list[dict[str, object]] = []  # every operator command, accepted or not
-        self._operator_replay = ReplayFilter()
+        self._operator_seen: set[tuple[str, int, int]] = set()
 
     async def start(self) -> None:
         # Declare everything before the liveliness token: a peer that sees the token may
@@ -103,8 +102,10 @@ class Commander:
         ctx = self._context
         if ctx is None or cmd.mission_id != ctx.mission_id:
             return "not the current mission"
-        if not self._operator_replay.accept(cmd.h, authenticated=self.mesh.authenticated):
+        seen = (cmd.h.sender, cmd.h.epoch, cmd.h.seq)
+        if seen in self._operator_seen:
             return "replayed"
+        self._operator_seen.add(seen)  # bounded: one mission ends once
         if ctx.state == "ended":
             return "already ended"
         who = cmd.by or cmd.h.sender

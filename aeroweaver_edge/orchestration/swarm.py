@@ -284,6 +284,11 @@ async def until_stopped(work: Awaitable[T], commander: Commander) -> T | None:
     stop = asyncio.ensure_future(commander.ended.wait())
     try:
         await asyncio.wait({job, stop}, return_when=asyncio.FIRST_COMPLETED)
+    except BaseException:  # we were cancelled: so is the work
+        job.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await job
+        raise
     finally:
         stop.cancel()
     if job.done():
