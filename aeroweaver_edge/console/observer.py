@@ -53,7 +53,8 @@ class SwarmObserver:
         self.swarm = swarm
         self.keys = Keys(swarm)
         self.store = store
-        self.alive: set[str] = set()
+        self.alive: set[str] = set()  # every identity with a liveliness token
+        self.uavs: set[str] = set()  # the UAV daemons among them
         self._context: MissionContext | None = None
         self._assign: dict[str, Assignment] = {}
         self._tasks: list[asyncio.Task[None]] = []
@@ -102,9 +103,12 @@ class SwarmObserver:
                 log.exception("console: %s dropped", type(msg).__name__)
 
     async def _pump_alive(self, watch: Any) -> None:
+        prefix = self.keys.alive_uav("")
         async for key, alive in watch:
             name = key.rsplit("/", 1)[-1]
             (self.alive.add if alive else self.alive.discard)(name)
+            if key.startswith(prefix):
+                (self.uavs.add if alive else self.uavs.discard)(name)
             self.store.update_meta(alive=sorted(self.alive))
 
     # -- handlers (on the loop) ---------------------------------------------------------

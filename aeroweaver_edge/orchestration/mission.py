@@ -43,6 +43,7 @@ class MissionStartOptions:
     max_rounds: int = d.MAX_ROUNDS
     deadline_s: float = d.DEADLINE_S
     plan: MissionPlan | None = None  # planned earlier against the live roster (``aeroweaver mcp``)
+    pace_s: float = 0.0  # sim world: wall-clock floor per round
 
 
 async def start_mission(
@@ -73,7 +74,7 @@ async def start_mission(
                 task = world_task(plan, opts.max_rounds)
                 cfg = SimConfig(
                     task=plan.task, uavs=task.n_uavs, seed=opts.seed,
-                    max_rounds=opts.max_rounds, deadline_s=opts.deadline_s,
+                    max_rounds=opts.max_rounds, deadline_s=opts.deadline_s, pace_s=opts.pace_s,
                 )  # fmt: skip
 
                 async def hook(log: RoundLog) -> None:

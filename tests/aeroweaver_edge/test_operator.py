@@ -21,9 +21,13 @@ pytestmark = pytest.mark.timeout(120)
 
 
 async def wait_for(cond: Any, what: str, timeout_s: float = 20.0) -> None:
-    async with asyncio.timeout(timeout_s):
-        while not await cond():
-            await asyncio.sleep(0.05)
+    """Poll a UAV's state over the mesh until ``cond`` holds (bounded; fails naming it)."""
+    try:
+        async with asyncio.timeout(timeout_s):
+            while not await cond():  # noqa: ASYNC110 - remote state: no local event
+                await asyncio.sleep(0.05)
+    except TimeoutError:
+        pytest.fail(f"timed out waiting for {what}")
 
 
 async def test_strict_swarm_launches_only_what_an_operator_approved() -> None:

@@ -139,7 +139,8 @@ async def test_replay_serves_a_trace_and_is_read_only(tmp_path: Path) -> None:
         meta = (await http.get("/api/meta")).json()
         assert meta["mode"] == "replay"
         assert meta["operator"] == {"enabled": False, "read_only": "a replay"}
-        r = await http.post("/api/operator/stop", json={"confirm": "x"}, headers={"X-AW-Token": token})
+        auth = {"X-AW-Token": token}
+        r = await http.post("/api/operator/stop", json={"confirm": "x"}, headers=auth)
         assert r.status_code == 403
         assert "read-only (a replay)" in r.json()["error"]
         js = await http.get("/static/console.js")
