@@ -107,7 +107,7 @@ class OperatorLink:
     # -- stopping the mission -----------------------------------------------------------
 
     async def plan_stop(self, timeout_s: float = 3.0) -> StopPlan:
-        await self._wait_token(self.keys.alive_cmdr, "no Commander", timeout_s)
+        await self._wait_token(self.keys.alive_cmdr, "the Commander", timeout_s)
         ctx = await self.context()
         if ctx is None:
             raise OperatorError("the Commander has no mission to stop")
@@ -120,7 +120,7 @@ class OperatorLink:
         once its ended context is seen."""
         sub = self.mesh.subscribe(self.keys.context, MissionContext, maxsize=16)
         try:
-            await self._wait_token(self.keys.alive_cmdr, "no Commander", timeout_s)
+            await self._wait_token(self.keys.alive_cmdr, "the Commander", timeout_s)
             self.mesh.put(
                 self.keys.operator_command,
                 OperatorCommand(h=self.headers.next(), action="stop", mission_id=plan.mission_id,
@@ -160,7 +160,7 @@ class OperatorLink:
         sub = self.mesh.subscribe(self.keys.approval_status(uav), ApprovalStatus, maxsize=64)
         record: ApprovalRecord | None = None
         try:
-            await self._wait_token(self.keys.alive_uav(uav), f"{uav} is not up:", timeout_s)
+            await self._wait_token(self.keys.alive_uav(uav), uav, timeout_s)
             self.mesh.put(
                 self.keys.approval(uav),
                 Approval(h=self.headers.next(), id=approval_id, uav=uav, action=action,

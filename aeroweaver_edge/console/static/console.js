@@ -317,6 +317,7 @@ function renderDecision(f) {
     html += "</tbody></table>";
   }
   const t = d.tokens || {};
+  if (!d.llm_calls && !t.prompt && opts.length) html += '<div class="kv">scores from a scripted selector, not an LLM: they say nothing about LLM quality</div>';
   html += `<div class="why">why: ${esc(d.reason || "—")}${d.corrected ? " (the experience correction changed the pick)" : ""}; β=${esc(d.beta)}` +
     `${d.omitted_bound != null ? `; omitted-label bound ${Number(d.omitted_bound).toFixed(3)}` : ""}</div>` +
     `<div class="kv">tokens ${(t.prompt || 0) + (t.completion || 0)} (prompt ${t.prompt || 0}, cached ${t.prompt_cached || 0}) · latency ${Number(d.latency_s || 0).toFixed(3)} s · LLM calls ${d.llm_calls || 0}</div>`;
