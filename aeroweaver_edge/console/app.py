@@ -44,6 +44,7 @@ from aeroweaver_edge.console.frames import FrameStore, encode
 from aeroweaver_edge.operator import OperatorError, OperatorLink, record_dict
 
 KEEPALIVE_S = 10.0
+PATCH_BATCH_S = 0.1
 SKILL_OF = {kind: skill for skill, kind in VEHICLE_ACTION_SKILLS.items()}
 MAX_TTL_S = 86_400.0
 
@@ -161,6 +162,10 @@ class ConsoleApp:
                 patch_seq = store.patch_seq
             yield "".join(out) if out else ": keep-alive\n\n"
             await store.wait_change(KEEPALIVE_S)
+            if store.last_index == last and not store.closed:
+                # Only decisions or status changed: let a burst of reports gather into one
+                # event (a new frame is never held back).
+                await store.wait_frame(PATCH_BATCH_S, last)
 
     # -- acting ---------------------------------------------------------------------------
 

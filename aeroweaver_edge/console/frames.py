@@ -175,6 +175,16 @@ class FrameStore:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(event.wait(), timeout_s)
 
+    async def wait_frame(self, timeout_s: float, after: int) -> None:
+        """Wait up to ``timeout_s`` unless a frame newer than ``after`` arrives first."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while self.last_index <= after and not self.closed:
+            left = deadline - loop.time()
+            if left <= 0:
+                return
+            await self.wait_change(left)
+
     def close(self) -> None:
         self.closed = True
         self._changed()

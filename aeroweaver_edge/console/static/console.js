@@ -12,6 +12,7 @@ const S = {
   meta: {}, frames: [], base: 0, cur: -1, follow: true, playing: true,
   selected: null, approvals: {}, roleColour: {}, anim: null, msgs: [],
   drawn: [], markers: [], lastPlay: 0, es: null, backfilling: false,
+  dirtySide: false, dirtyCharts: false, chartsAt: 0,
 };
 window.__aw = S; // for tests and the latency bench: state, drawn rounds, marker positions
 
@@ -31,7 +32,7 @@ function addFrames(list) {
   $("scrub").min = S.base;
   $("scrub").max = Math.max(S.base, lastIndex());
   if (S.follow) show(lastIndex());
-  drawCharts();
+  S.dirtyCharts = true;
 }
 
 async function backfill() {
@@ -54,7 +55,7 @@ function show(i) {
   for (const m of f.messages || []) S.msgs.push({ ...m, t0: now, frame: f });
   S.msgs = S.msgs.filter((m) => now - m.t0 < MSG_LIFE_MS);
   $("scrub").value = i;
-  renderSide(f);
+  S.dirtySide = true;
 }
 
 function animMs() {
@@ -244,17 +245,19 @@ function drawCharts() {
 function tick(now) {
   if (S.playing && !S.follow && S.cur < lastIndex()) {
     const stepMs = (1000 * (Number(S.meta.round_s) || 0.5)) / Number($("speed").value);
-    if (now - S.lastPlay >= stepMs) { S.lastPlay = now; show(S.cur + 1); drawCharts(); }
+    if (now - S.lastPlay >= stepMs) { S.lastPlay = now; show(S.cur + 1); S.dirtyCharts = true; }
   } else if (S.playing && !S.follow && S.meta.mode === "live") {
     S.follow = true; // caught up with the live run
     updateButtons();
   }
   drawMap(now);
   const f = frameAt(S.cur);
+  if (f && S.dirtySide) { S.dirtySide = false; renderSide(f); }
+  if (S.dirtyCharts && now - S.chartsAt > 250) { S.dirtyCharts = false; S.chartsAt = now; drawCharts(); }
   if (f && !f._drawn) {
     // the frame's first paint: the latency bench compares this with the world's stamp
     f._drawn = (performance.timeOrigin + performance.now()) / 1000;
-    S.drawn.push({ i: f.i, episode: f.episode, round: f.round, stamp: f.stamp, drawn: f._drawn, bodies: (f.bodies || []).length });
+    S.drawn.push({ i: f.i, episode: f.episode, round: f.round, stamp: f.stamp, recv: f._recv, drawn: f._drawn, bodies: (f.bodies || []).length });
     if (S.drawn.length > 10000) S.drawn.shift();
   }
   requestAnimationFrame(tick);
@@ -326,8 +329,7 @@ function renderDecision(f) {
 
 function select(uav) {
   S.selected = uav === S.selected ? null : uav;
-  const f = frameAt(S.cur);
-  if (f) renderSide(f);
+  S.dirtySide = true;
 }
 
 // -- operator actions -------------------------------------------------------------------
@@ -421,7 +423,9 @@ function connect() {
   es.addEventListener("meta", (e) => applyMeta(JSON.parse(e.data)));
   es.addEventListener("approvals", (e) => { S.approvals = JSON.parse(e.data); renderOperator(); });
   es.addEventListener("frame", (e) => {
+    const recv = (performance.timeOrigin + performance.now()) / 1000;
     const f = JSON.parse(e.data);
+    f._recv = recv;
     addFrames([f]);
     if (S.frames.includes(null)) backfill();
   });
@@ -430,8 +434,8 @@ function connect() {
     const f = frameAt(p.i);
     if (!f) return;
     Object.assign(f.decisions, p.decisions);
-    if (p.i === S.cur) renderSide(f);
-    drawCharts();
+    if (p.i === S.cur) S.dirtySide = true;
+    S.dirtyCharts = true;
   });
   es.onopen = () => { $("conn").textContent = "connected"; };
   es.onerror = () => { $("conn").textContent = "disconnected: the frames so far stay here"; };
