@@ -115,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         lat, fi = out["latency_s"], out["frame_interval_ms"]
         wire, paint = out["to_browser_s"], out["in_browser_s"]
         print(
-            f"{n:3d} UAVs ({args.task}, {out['daemons']} daemons): world round -> pixel p50 {lat['p50'] * 1e3:.1f} ms, "
+            f"{n:3d} UAVs ({args.task}, {out['daemons']} daemons): world round -> pixel "
+            f"p50 {lat['p50'] * 1e3:.1f} ms, "
             f"p95 {lat['p95'] * 1e3:.1f} ms, max {lat['max'] * 1e3:.1f} ms over {out['rounds']} "
             f"rounds (to the page p50 {wire['p50'] * 1e3:.1f} ms, in the page p50 "
             f"{paint['p50'] * 1e3:.1f} ms); animation frames p50 {fi['p50']} ms, p95 "

@@ -95,7 +95,7 @@ class Console:
             self._read_only = ""
         else:
             self._read_only = (
-                "read-only by choice" if not act else f"identity {identity!r} is a {role}"
+                f"identity {identity!r} has the {role} role" if act else "read-only by choice"
             )
         self._observer = SwarmObserver(self._mesh, swarm, self.store)
         await self._observer.start()
