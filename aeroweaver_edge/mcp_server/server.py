@@ -33,6 +33,7 @@ from mcp.server.mcpserver import MCPServer
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.approval import VEHICLE_ACTION_SKILLS, parse_action
 from aeroweaver_edge.config import LLMConfig, MeshConfig
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.console.frames import FrameStore
 from aeroweaver_edge.console.observer import SwarmObserver
 from aeroweaver_edge.mesh import Mesh
@@ -275,7 +276,7 @@ def build_server(service: SwarmService) -> MCPServer[Any]:
             return {"done": False, "error": why}
         try:
             return {"done": True, **await service.start_mission(plan)}
-        except (OperatorError, TimeoutError) as exc:
+        except (UserError, TimeoutError) as exc:  # e.g. no Commander identity for the session
             return {"done": False, "error": str(exc) or "the mission did not start in time"}
 
     @server.tool()

@@ -84,3 +84,17 @@ def test_user_error_is_one_line_exit_2(
     for needle in needles:
         assert needle in lines[0], (needle, lines[0])
     assert proc.stdout == ""
+
+
+def test_sim_with_the_console_prints_its_url_and_finishes(tmp_path: Path) -> None:
+    trace = tmp_path / "run.jsonl"
+    proc = subprocess.run(
+        [*aeroweaver(), "sim", "coverage", "--selector", "scripted", "--console",
+         "--console-port", "0", "--rounds", "3", "--pace", "0", "--quiet", "--trace", str(trace)],
+        capture_output=True, text=True, timeout=120, cwd=tmp_path, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    first = proc.stdout.splitlines()[0]
+    assert first.startswith("console: http://127.0.0.1:")
+    assert not first.endswith(":0/")  # the port it really got
+    assert trace.exists()
