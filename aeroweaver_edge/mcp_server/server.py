@@ -33,9 +33,9 @@ from mcp.server.mcpserver import MCPServer
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.approval import VEHICLE_ACTION_SKILLS, parse_action
 from aeroweaver_edge.config import LLMConfig, MeshConfig
-from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.console.frames import FrameStore
 from aeroweaver_edge.console.observer import SwarmObserver
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.operator import OPERATOR, OperatorError, OperatorLink, record_dict
 from aeroweaver_edge.orchestration.planning import natural
