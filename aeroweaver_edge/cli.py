@@ -113,6 +113,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.memory_dir:
         check_memory_dir(Path(args.memory_dir))
     check_skills()
+    if args.pace is not None and args.pace > 60:
+        raise UserError(f"--pace {args.pace:g}: at most 60 seconds per round")
     llm = _llm_from_args(args) if args.selector == "llm" else LLMConfig()
     if args.link == "mavsdk" and importlib.util.find_spec("mavsdk") is None:
         raise UserError(
@@ -140,10 +142,21 @@ def cmd_sim(args: argparse.Namespace) -> int:
         trace_path=Path(args.trace) if args.trace else None,
         slots=True if args.llm_slots else None,
         secure=not args.insecure,
+        pace_s=args.pace if args.pace is not None else (defaults.ROUND_S if args.console else 0.0),
+        approval=args.approval,
     )
     view = None if args.quiet else LiveView()
+    if args.console:
+        from aeroweaver_edge.cli_operator import require_extra
+
+        require_extra("console")
+        from aeroweaver_edge.console.server import with_console
+
+        run = with_console(opts, args.console_host, args.console_port, view)
+    else:
+        run = run_swarm(opts, on_round=view.on_round if view else None)
     try:
-        summary = _run(run_swarm(opts, on_round=view.on_round if view else None))
+        summary = _run(run)
     except (KeyboardInterrupt, Stopped):
         print("aeroweaver: stopped by the operator; every UAV was told to hold", file=sys.stderr)
         return 130
@@ -505,6 +518,32 @@ def build_parser() -> argparse.ArgumentParser:
         help="plain loopback TCP: no TLS, ACL or signatures (default: a throw-away PKI per run, "
         "every session mutually authenticated, ACL-checked and signed)",
     )  # fmt: skip
+    s.add_argument(
+        "--console",
+        action="store_true",
+        help="serve the live web console next to the run (prints its URL)",
+    )
+    s.add_argument(
+        "--console-port",
+        type=int_in(0, 65535),
+        default=8765,
+        metavar="PORT",
+        help="console HTTP port (default 8765; 0: any free port)",
+    )
+    s.add_argument("--console-host", default="127.0.0.1", help="console HTTP address")
+    s.add_argument(
+        "--pace",
+        type=finite(strict=False),
+        default=None,
+        metavar="SECONDS",
+        help="wall-clock floor per round (default 0, or 0.5 with --console)",
+    )
+    s.add_argument(
+        "--approval",
+        choices=["normal", "strict"],
+        default="normal",
+        help="operator approval level of the daemons (strict: take-off waits)",
+    )
     _add_llm_flags(s)
     s.set_defaults(func=cmd_sim)
 
@@ -566,6 +605,9 @@ def build_parser() -> argparse.ArgumentParser:
     from aeroweaver_edge.security.cli import add_parsers as add_security_parsers
 
     add_security_parsers(sub)  # keys init|rotate|show, router
+    from aeroweaver_edge.cli_operator import add_parsers as add_operator_parsers
+
+    add_operator_parsers(sub)  # console, approve, mcp
 
     from aeroweaver_edge.baselines.cli import add_parser as add_central
 

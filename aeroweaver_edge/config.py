@@ -296,6 +296,24 @@ class VehicleConfig(_Section):
         return self
 
 
+class ApprovalConfig(_Section):
+    """``[approval]``: operator approval for vehicle actions (``aeroweaver_edge.approval``).
+    normal: take-off needs one approval per mission, land and return none (notes/safety.md);
+    strict: every take-off (the mission launch too), landing and return needs its own."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    level: Literal["normal", "strict"] = "normal"
+    # Identities whose approvals count (their signatures are checked when the mesh is secured).
+    approvers: list[str] = Field(default_factory=lambda: ["operator"], min_length=1, max_length=16)
+    max_ttl_s: float = Field(default=3600.0, gt=0, le=86_400)  # longer approvals are cut to this
+
+    @field_validator("approvers")
+    @classmethod
+    def _approver_ids(cls, value: list[str]) -> list[str]:
+        return [_check_id(v, "approver") for v in value]
+
+
 class FieldPoint(_Section):
     """A known point of interest for a daemon flying without a simulator."""
 
@@ -331,6 +349,7 @@ class UavConfig(_Section):
     safety: SafetyConfig = SafetyConfig()
     vehicle: VehicleConfig = VehicleConfig()
     field: FieldConfig = FieldConfig()
+    approval: ApprovalConfig = ApprovalConfig()
 
     @field_validator("uav")
     @classmethod
@@ -363,6 +382,9 @@ class SimConfig(_Section):
     altitude_m: float = Field(default=d.ALTITUDE_M, gt=0)
     max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0)
     max_accel_mps2: float = Field(default=d.MAX_ACCEL_MPS2, gt=0)
+    # Wall-clock floor per round (0: as fast as the daemons decide). The console sets the
+    # paper's 0.5 s so a scripted run can be watched; results do not depend on it.
+    pace_s: float = Field(default=0.0, ge=0, le=60)
 
 
 class ConfigError(UserError):

@@ -24,10 +24,12 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.agent.history import InteractionHistory
+from aeroweaver_edge.approval import ApprovalGate
+from aeroweaver_edge.approval_link import ApprovalLink
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
-from aeroweaver_edge.flight_phases import ApprovalPredicate, FlightPhases, default_approval
+from aeroweaver_edge.flight_phases import ApprovalPredicate, FlightPhases
 from aeroweaver_edge.hold_reasons import count_causes
 from aeroweaver_edge.inbox import RADIO_DROPS, PeerLimits, within
 from aeroweaver_edge.lifecycle import cancel_all
@@ -130,7 +132,7 @@ class UavDaemon:
         altitude_m: float = ALTITUDE_M,
         round_s: float = ROUND_S,
         on_round: Callable[[RoundOutcome], Awaitable[None]] | None = None,
-        approve: ApprovalPredicate = default_approval,
+        approve: ApprovalPredicate | None = None,
         peer_limits: PeerLimits | None = None,
     ) -> None:
         self.cfg = cfg
@@ -160,6 +162,11 @@ class UavDaemon:
         self._last_reward: float | None = None
         self._warmed: tuple[str, str] | None = None
         self._tasks: list[asyncio.Task[Any]] = []
+        # Operator approval for vehicle actions ([approval] level; approvals arrive over the
+        # mesh, see approval_link). An explicit ``approve`` predicate replaces it (tests).
+        self.approvals = ApprovalGate(cfg.uav, cfg.approval, mission=self._mission_id)
+        self._approval_link: ApprovalLink | None = None
+        gated = approve is None
         # Flight phases (preflight, arm, take off, offboard, mission, land/return) wrap the
         # Vehicle port; the round flies through them. ``approve`` gates vehicle actions.
         self.phases = FlightPhases(
@@ -169,7 +176,8 @@ class UavDaemon:
             end_action=cfg.vehicle.end_action,
             on_link_loss=cfg.vehicle.on_link_loss,
             takeoff_timeout_s=cfg.vehicle.takeoff_timeout_s,
-            approve=approve,
+            approve=self.approvals.approve if approve is None else approve,
+            gate_launch=gated and self.approvals.gates_launch,
         )
         self.rc = RoundContext(
             uav=cfg.uav,
@@ -187,7 +195,12 @@ class UavDaemon:
             ),
             altitude_m=altitude_m,
             act=self.phases.act,
+            offer=self.approvals.offer if gated else None,
         )
+
+    def _mission_id(self) -> str | None:
+        view = self.mission.view()
+        return view.mission_id if view is not None else None
 
     @property
     def neighbours(self) -> Mapping[str, StateBeacon]:
@@ -339,6 +352,10 @@ class UavDaemon:
             asyncio.create_task(self._pump_assignment(assignment), name=f"{self.uav}-assignment"),
             asyncio.create_task(self._pump_commander(commander), name=f"{self.uav}-commander"),
         ]
+        self._approval_link = ApprovalLink(
+            self.mesh, self.keys, self.uav, self.headers, self.approvals
+        )
+        self._approval_link.start()  # before the token, like the other subscriptions
         if self.memory is not None and self.cfg.agent.share_experience:
             shared = self.mesh.subscribe(self.keys.experience("*"), ExperienceRecord)
             self._tasks.append(
@@ -384,6 +401,8 @@ class UavDaemon:
             # returns if flying (vehicle.end_action), else holds. Never raises.
             await self.phases.finish("daemon stopping")
             await cancel_all(self._tasks)
+            if self._approval_link is not None:
+                await self._approval_link.aclose()
             if self._peer_link is not None:
                 await self._peer_link.aclose()
         return self.stats

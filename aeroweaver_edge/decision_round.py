@@ -97,6 +97,8 @@ class RoundContext:
     # flight: carries out a skill's vehicle action (take off, land, return) through the
     # daemon's flight phases; returns why it was refused, or None when done.
     act: Callable[[VehicleAction], Awaitable[str | None]] | None = None
+    # operator approval: may this skill be offered? (None: every skill with options)
+    offer: Callable[[str], bool] | None = None
 
 
 async def _advantages(
@@ -235,7 +237,7 @@ async def _decide_and_act(
     budget = rc.agent.max_labels
     if rc.selector.label_budget is not None:
         budget = min(budget, rc.selector.label_budget)
-    cs = build_candidates(rc.registry, view.skills, obs, ctx, budget)
+    cs = build_candidates(rc.registry, view.skills, obs, ctx, budget, allow=rc.offer)
     if cs.overflow:
         await rc.vehicle.hold()
         why = f"{cs.overflow} options beyond the label budget"

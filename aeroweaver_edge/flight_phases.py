@@ -83,6 +83,7 @@ class FlightPhases:
         takeoff_timeout_s: float = 60.0,
         approve: ApprovalPredicate = default_approval,
         poll_s: float = 0.05,
+        gate_launch: bool = False,
     ) -> None:
         self.inner = vehicle
         self.uav = uav
@@ -92,6 +93,9 @@ class FlightPhases:
         self.takeoff_timeout_s = takeoff_timeout_s
         self.approve = approve
         self.poll_s = poll_s
+        # The mission's own launch (arm + take-off) passes ``approve`` too (approval level
+        # strict); otherwise only skill-chosen vehicle actions do.
+        self.gate_launch = gate_launch
         self.phase = Phase.GROUND
         self.stats = PhaseStats()
         self._lock = asyncio.Lock()
@@ -108,15 +112,16 @@ class FlightPhases:
 
     # -- launch and finish ----------------------------------------------------------------
 
-    async def launch(self) -> bool:
-        """Bring the vehicle into the MISSION phase once; True when it is there."""
+    async def launch(self, *, approved: bool = False) -> bool:
+        """Bring the vehicle into the MISSION phase once; True when it is there.
+        ``approved``: the take-off already passed the approval check (a skill's action)."""
         async with self._lock:
             if self.phase in (Phase.LANDING, Phase.RETURNING) and not await self._airborne():
                 self._to(Phase.GROUND, "landed; ready for the next mission")
             if self.phase != Phase.GROUND:
                 return self._in_mission()
             try:
-                await self._launch()
+                await self._launch(approved or not self.gate_launch)
             except Exception as exc:  # never let a launch problem end the daemon
                 self.stats.errors[type(exc).__name__] += 1
                 log.error("%s: launch failed: %s", self.uav, exc)
@@ -133,13 +138,16 @@ class FlightPhases:
         except Exception:
             return True  # unknown: assume the worst, do not relaunch
 
-    async def _launch(self) -> None:
+    async def _launch(self, approved: bool) -> None:
         st = await self.inner.state()
         if st.in_air:
             # A restarted daemon: never arm or take off; hold, then fresh decisions only.
             self._to(Phase.RECOVERING, "vehicle already in the air at start-up")
             await self.inner.hold()
             self._to(Phase.MISSION, "recovered in the air")
+            return
+        if not approved and not self.approve(self.uav, VehicleAction("takeoff")):
+            await self._safe_hold()  # on the ground until an operator approves the take-off
             return
         self._to(Phase.PREFLIGHT, "mission assigned")
         health = await self.inner.health()
@@ -277,7 +285,8 @@ class FlightPhases:
                     return f"take-off refused in phase {self.phase.value}"
                 if action.altitude_m is not None:
                     self.altitude_m = action.altitude_m
-                return None if await self.launch() else f"take-off failed ({self.phase.value})"
+                launched = await self.launch(approved=True)
+                return None if launched else f"take-off failed ({self.phase.value})"
             if not self.flying:
                 return f"{action.kind} refused in phase {self.phase.value}"
             await self._end("land" if action.kind == "land" else "return", "skill")

@@ -19,6 +19,7 @@ from typing import Annotated, Any, Final, Literal, TypeVar
 
 import msgspec
 
+from aeroweaver_edge import defaults
 from aeroweaver_edge.hold_reasons import HoldCause
 
 SCHEMA_VERSION: Final = 1
@@ -290,6 +291,96 @@ class CentralAnswer(msgspec.Struct, frozen=True, kw_only=True, tag="central"):
     reason: str = ""
 
 
+class WorldSnapshot(msgspec.Struct, frozen=True, kw_only=True, tag="snapshot"):
+    """Simulator -> observers (the console, traces): the world after one round, published
+    once per round. ``h.stamp`` is when the world published it (the console's latency
+    reference). Read-only data: nothing acts on it."""
+
+    h: Header
+    task: str
+    episode: int
+    round: int  # 0-based decision round
+    uavs: list[str]  # the UAVs we fly; the other bodies are the world's own agents
+    bodies: list[Entity] = []
+    entities: list[Entity] = []
+    rewards: dict[str, float] = {}
+    held: list[str] = []  # controlled UAVs whose applied command was a hold (or missing)
+    messages: list[MsgRef] = []  # sent this round: (sender, seq, to)
+    guesses: dict[str, str] = {}
+    missed: list[str] = []
+    absent: list[str] = []
+    complete: bool = False
+    done: bool = False
+    reason: str = ""
+    arena_half_m: float = defaults.ARENA_HALF_M
+    comm_radius_m: float = defaults.COMM_RADIUS_M
+    sensing_radius_m: float = defaults.SENSING_RADIUS_M
+
+
+VehicleActionKind = Literal["takeoff", "land", "return_home"]
+"""The vehicle actions an operator approves (``actions.VehicleAction.kind``)."""
+
+
+class OperatorCommand(msgspec.Struct, frozen=True, kw_only=True, tag="operator"):
+    """Operator -> Commander (``aw/<swarm>/operator/command``): stop the mission. The
+    Commander acts on it only from an operator identity and only for its current mission;
+    it never reaches a vehicle (every UAV holds, then lands or returns, by itself)."""
+
+    h: Header
+    action: Literal["stop"]
+    mission_id: Annotated[str, msgspec.Meta(min_length=1, max_length=128)]
+    reason: Annotated[str, msgspec.Meta(max_length=200)] = ""
+    by: Annotated[str, msgspec.Meta(max_length=64)] = ""  # the person, for the record
+
+
+class Approval(msgspec.Struct, frozen=True, kw_only=True, tag="approval"):
+    """Operator -> one UAV (``aw/<swarm>/operator/approval/<uav>``): this vehicle action may
+    run within ``ttl_s`` of receipt. Single-use or per mission, as the UAV's approval level
+    says; the UAV checks the sender, the freshness and the id, records it and acknowledges."""
+
+    h: Header
+    id: Annotated[str, msgspec.Meta(min_length=8, max_length=64)]
+    uav: str
+    action: VehicleActionKind
+    ttl_s: Annotated[float, msgspec.Meta(gt=0, le=86_400)]
+    by: Annotated[str, msgspec.Meta(max_length=64)] = ""
+    mission_id: str = ""  # "" : whatever mission the UAV flies when it is used
+
+
+class ApprovalRecord(msgspec.Struct, frozen=True, kw_only=True):
+    """One approval as a UAV recorded it: who, when, what, until when, and what became of it."""
+
+    id: str
+    action: VehicleActionKind
+    sender: str  # the identity that sent it
+    by: str  # the person it names
+    issued: float  # sender's wall clock (informative)
+    received: float  # this UAV's wall clock
+    expires: float  # this UAV's wall clock: received + ttl
+    mission_id: str = ""
+    state: Literal["granted", "used", "expired", "refused"] = "granted"
+    uses: int = 0
+    reason: str = ""  # why it was refused, if it was
+
+
+class PendingAction(msgspec.Struct, frozen=True, kw_only=True):
+    action: VehicleActionKind
+    since: float  # this UAV's wall clock, first asked
+    skill: str = ""  # the skill that wanted it, or "" for the mission launch
+
+
+class ApprovalStatus(msgspec.Struct, frozen=True, kw_only=True, tag="approval_status"):
+    """One UAV -> everyone (``aw/<swarm>/uav/<id>/approval``, also served by query): its
+    approval level, the vehicle actions waiting for an operator, and its recent records."""
+
+    h: Header
+    uav: str
+    level: str
+    pending: list[PendingAction] = []
+    records: list[ApprovalRecord] = []
+    ack: str = ""  # the approval id this status answers, if any
+
+
 Payload = (
     StateBeacon
     | InboxMessage
@@ -304,6 +395,10 @@ Payload = (
     | CentralAsk
     | CentralReview
     | CentralAnswer
+    | WorldSnapshot
+    | OperatorCommand
+    | Approval
+    | ApprovalStatus
 )
 
 
@@ -389,6 +484,24 @@ class Keys:
     @property
     def alive_central(self) -> str:
         return f"{self.root}/alive/central"
+
+    @property
+    def sim_snapshot(self) -> str:
+        """The world after each round, for observers (``WorldSnapshot``)."""
+        return self.sim("snapshot")
+
+    @property
+    def operator_command(self) -> str:
+        """Operator -> Commander: stop the mission (``OperatorCommand``)."""
+        return f"{self.root}/operator/command"
+
+    def approval(self, uav: str = "*") -> str:
+        """Operator -> one UAV: an approval for a vehicle action (``Approval``)."""
+        return f"{self.root}/operator/approval/{uav}"
+
+    def approval_status(self, uav: str = "*") -> str:
+        """A UAV's approval level, pending actions and records (``ApprovalStatus``)."""
+        return f"{self.root}/uav/{uav}/approval"
 
 
 def last_chunk(key: str) -> str:

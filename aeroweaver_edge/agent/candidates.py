@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import string
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -36,9 +36,12 @@ def build_candidates(
     obs: Observation,
     ctx: SkillContext,
     max_labels: int = len(LABELS),
+    allow: Callable[[str], bool] | None = None,
 ) -> CandidateSet:
     """One candidate per option of each active skill, in the order the skills were
-    activated, deduplicated by invocation text and lettered A, B, C, ..."""
+    activated, deduplicated by invocation text and lettered A, B, C, ... ``allow(skill)``
+    is asked for each skill that has options (the operator approval gate withholds a
+    vehicle action it has no approval for)."""
     seen: set[str] = set()
     found: list[tuple[str, SkillParams, str]] = []
     for name in active:
@@ -49,6 +52,8 @@ def build_candidates(
             options = skill.options(obs, ctx)
         except Exception:  # a broken skill loses its options, not the round
             log.exception("%s: options() of %s failed; skipping it this round", ctx.uav, name)
+            continue
+        if options and allow is not None and not allow(name):
             continue
         for params in options:
             text = params.invocation(name)

@@ -24,13 +24,14 @@ from aeroweaver_edge import defaults as d
 from aeroweaver_edge.config import ConfigError, LLMConfig, MeshConfig, SafetyConfig, SimConfig
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.planning import natural
-from aeroweaver_edge.orchestration.swarm import world_task
+from aeroweaver_edge.orchestration.swarm import until_stopped, world_task
 from aeroweaver_edge.security.identity import COMMANDER, WORLD
 from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from commander.commander import Commander
 from commander.harness import plan_from_text
 from commander.mission_start import discover_roster, progress_row, watch_until
+from commander.plan import MissionPlan
 from commander.progress import ProgressBoard
 
 
@@ -49,6 +50,8 @@ class MissionStartOptions:
     deadline_s: float = d.DEADLINE_S
     world_mesh: MeshConfig | None = None  # the world's own session (secured); None: shares ours
     safety: SafetyConfig = field(default_factory=SafetyConfig)  # the envelope the world checks
+    plan: MissionPlan | None = None  # planned earlier against the live roster (``aeroweaver mcp``)
+    pace_s: float = 0.0  # sim world: wall-clock floor per round
 
 
 async def start_mission(
@@ -69,7 +72,7 @@ async def start_mission(
                 f"no UAV daemon of swarm {opts.swarm!r} is up (waited {opts.roster_wait_s:.0f} s)"
             )
         out["roster"] = roster
-        plan = await plan_from_text(opts.text, roster, opts.llm, opts.top_k)
+        plan = opts.plan or await plan_from_text(opts.text, roster, opts.llm, opts.top_k)
         out["mission"] = plan.as_dict()
         commander = Commander(mesh, opts.swarm, headers)
         await commander.start()
@@ -82,7 +85,7 @@ async def start_mission(
                 task = world_task(plan, opts.max_rounds)
                 cfg = SimConfig(
                     task=plan.task, uavs=task.n_uavs, seed=opts.seed,
-                    max_rounds=opts.max_rounds, deadline_s=opts.deadline_s,
+                    max_rounds=opts.max_rounds, deadline_s=opts.deadline_s, pace_s=opts.pace_s,
                 )  # fmt: skip
 
                 async def hook(log: RoundLog) -> None:
@@ -102,7 +105,9 @@ async def start_mission(
                 stack.push_async_callback(runner.aclose)
                 await runner.wait_alive(plan.participants, 10.0)
                 for ep in range(opts.episodes):
-                    res = await runner.run_episode(ep)
+                    res = await until_stopped(runner.run_episode(ep), commander)
+                    if res is None:  # an operator stopped it (console, MCP)
+                        break
                     out["episodes"].append(
                         {"episode": ep, "rounds": res.rounds, "reason": res.reason,
                          "team_return": res.team_mean_return,
@@ -110,14 +115,19 @@ async def start_mission(
                          "scripted_returns": {b: res.returns[b] for b in task.scripted_ids}}
                     )  # fmt: skip
                 out["envelope_violations"] = runner.envelope.summary()
-                out["ended"] = (
+                out["ended"] = commander.end_reason or (
                     "complete"
                     if all(e["reason"] == "complete" for e in out["episodes"])
                     else "horizon"
                 )
             else:
-                await watch_until(commander, plan.participants, opts.max_rounds)
-                out["ended"] = "horizon"
+
+                async def watch() -> bool:
+                    await watch_until(commander, plan.participants, opts.max_rounds)
+                    return True
+
+                done = await until_stopped(watch(), commander)
+                out["ended"] = "horizon" if done else commander.end_reason
         except asyncio.CancelledError:
             # Ctrl-C / SIGTERM is the operator's stop: end the mission cleanly and report.
             out["ended"] = "operator stop"

@@ -26,7 +26,14 @@ from pathlib import Path
 
 from aeroweaver_edge.config import MeshConfig
 from aeroweaver_edge.mesh import Mesh, MeshError
-from aeroweaver_edge.security.identity import CENTRAL, COMMANDER, OBSERVER, WORLD, SwarmPki
+from aeroweaver_edge.security.identity import (
+    CENTRAL,
+    COMMANDER,
+    OBSERVER,
+    OPERATOR,
+    WORLD,
+    SwarmPki,
+)
 from aeroweaver_edge.security.wiring import ephemeral_swarm
 
 ROUTER = "router"
@@ -100,7 +107,7 @@ async def secured_network(
 ) -> AsyncIterator[RunNetwork]:
     """A throw-away PKI in ``root`` and a running router; the router closes on exit."""
     pki = await asyncio.to_thread(ephemeral_swarm, root, swarm, list(uav_ids))
-    names = [WORLD, COMMANDER, CENTRAL, OBSERVER, *uav_ids]
+    names = [WORLD, COMMANDER, CENTRAL, OBSERVER, OPERATOR, *uav_ids]
     router: Mesh | None = None
     for _ in range(3):  # the free port may be taken between probe and bind
         endpoint = f"tls/127.0.0.1:{free_port()}"
@@ -124,7 +131,7 @@ async def run_network(
 ) -> AsyncIterator[RunNetwork]:
     """The network of one run: ``secured_network`` or, with ``secure=False``, plain TCP."""
     if not secure:
-        yield insecure_network(namespace, [WORLD, COMMANDER, CENTRAL, OBSERVER, *uav_ids])
+        yield insecure_network(namespace, [WORLD, COMMANDER, CENTRAL, OBSERVER, OPERATOR, *uav_ids])
         return
     async with secured_network(root, swarm, namespace, uav_ids) as net:
         yield net

@@ -25,12 +25,13 @@ import uuid
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from aeroweaver_edge import defaults as d
 from aeroweaver_edge.agent.memory import new_run_id
 from aeroweaver_edge.config import (
     AgentConfig,
+    ApprovalConfig,
     LLMConfig,
     MeshConfig,
     SafetyConfig,
@@ -57,6 +58,8 @@ from aeroweaver_edge.tasks.base import TaskDefinition
 from commander.commander import Commander
 from commander.plan import MissionPlan
 from commander.progress import ProgressBoard
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -94,6 +97,8 @@ class SwarmOptions:
     coordination: bool = True
     central_gather_s: float = 3.0  # the central node waits this long for a round's asks
     finalised_only: bool = False  # AgentConfig.finalised_only (retrieval of ended episodes)
+    pace_s: float = 0.0  # wall-clock floor per round (the console: watchable scripted runs)
+    approval: Literal["normal", "strict"] = "normal"  # daemons' [approval] level
 
 
 @dataclass
@@ -138,6 +143,7 @@ class RunSummary:
     envelope_violations: dict[str, Any] = field(default_factory=dict)  # sim/envelope.py
     central: dict[str, Any] = field(default_factory=dict)  # a baseline's central node: totals
     tokens_by_side: dict[str, dict[str, int]] = field(default_factory=dict)  # uavs / central
+    stopped: str | None = None  # the operator's stop (console, MCP), if the run ended so
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -190,6 +196,7 @@ class RunSummary:
             **({"link": self.link} if self.link else {}),
             **({"central": self.central} if self.central else {}),
             **({"tokens_by_side": self.tokens_by_side} if self.tokens_by_side else {}),
+            **({"stopped": self.stopped} if self.stopped else {}),
         }
 
 
@@ -281,6 +288,39 @@ def _trace_header(summary: RunSummary, opts: SwarmOptions, cfg: SimConfig) -> di
     }
 
 
+@dataclass(frozen=True)
+class SwarmHandle:
+    """What an observer or operator next to a running swarm needs (``aeroweaver sim
+    --console``): the swarm, its Commander, and the mesh settings for an identity of this
+    run (``"observer"``, ``"operator"``); on plain loopback every identity gets the same."""
+
+    swarm: str
+    commander: Commander
+    mesh_for: Callable[[str], MeshConfig]
+
+
+async def until_stopped(work: Awaitable[T], commander: Commander) -> T | None:
+    """``work``'s result, or None (``work`` cancelled) once the Commander's mission ended
+    by an operator stop: the world stops flying rounds for a mission nobody flies."""
+    job = asyncio.ensure_future(work)
+    stop = asyncio.ensure_future(commander.ended.wait())
+    try:
+        await asyncio.wait({job, stop}, return_when=asyncio.FIRST_COMPLETED)
+    except BaseException:  # we were cancelled: so is the work
+        job.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await job
+        raise
+    finally:
+        stop.cancel()
+    if job.done():
+        return job.result()
+    job.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await job
+    return None
+
+
 def world_task(plan: MissionPlan, max_rounds: int) -> TaskDefinition:
     """The task definition the world flies for ``plan``: its task, its UAVs and roles."""
     roles = {u: plan.assignments[u].role for u in sorted(plan.assignments, key=natural)}
@@ -295,6 +335,7 @@ async def run_swarm(
     fault: Callable[[RoundLog, DaemonSet], Awaitable[None]] | None = None,
     on_commander: Callable[[Commander], None] | None = None,
     on_network: Callable[[RunNetwork], None] | None = None,
+    on_started: Callable[[SwarmHandle], Awaitable[None]] | None = None,
 ) -> RunSummary:
     started = time.monotonic()
     async with contextlib.AsyncExitStack() as stack:
@@ -355,6 +396,7 @@ async def run_swarm(
             seed=opts.seed,
             max_rounds=opts.max_rounds,
             deadline_s=opts.deadline_s,
+            pace_s=opts.pace_s,
         )
         namespace = f"aw-{uuid.uuid4().hex[:10]}"
         tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="aeroweaver-")))
@@ -412,6 +454,8 @@ async def run_swarm(
         stack.push_async_callback(commander.aclose)
         if on_commander is not None:
             on_commander(commander)
+        if on_started is not None:  # observers join before the first round
+            await on_started(SwarmHandle(opts.swarm, commander, net.config))
 
         pin_slots = source == "embedded" if opts.slots is None else opts.slots
         pin_slots = pin_slots and source != "scripted"
@@ -449,6 +493,7 @@ async def run_swarm(
                     finalised_only=opts.finalised_only,
                 ),
                 safety=opts.safety,
+                approval=ApprovalConfig(level=opts.approval),
                 **({"vehicle": linked.vehicles[u]} if linked else {}),
             )
             for i, u in enumerate(uavs)
@@ -470,7 +515,10 @@ async def run_swarm(
 
         try:
             for ep in range(opts.episodes):
-                result = await runner.run_episode(ep)
+                result = await until_stopped(runner.run_episode(ep), commander)
+                if result is None:  # an operator stopped the mission (console, MCP)
+                    summary.stopped = commander.end_reason
+                    break
                 summary.episodes.append(_episode_dict(ep, result, task))
                 if recorder is not None:
                     recorder.on_episode(ep, result)
@@ -561,4 +609,13 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else text
 
 
-__all__ = ["RunSummary", "SwarmOptions", "percentiles", "run_swarm", "world_task", "write_json"]
+__all__ = [
+    "RunSummary",
+    "SwarmHandle",
+    "SwarmOptions",
+    "percentiles",
+    "run_swarm",
+    "until_stopped",
+    "world_task",
+    "write_json",
+]

@@ -36,7 +36,7 @@ def _xy(v: Vec3) -> list[float]:
     return [round(v[0], 2), round(v[1], 2)]
 
 
-def _entity(e: Entity) -> dict[str, Any]:
+def entity_dict(e: Entity) -> dict[str, Any]:
     out: dict[str, Any] = {"id": e.id, "kind": e.kind, "pos": _xy(e.pos)}
     if e.role:
         out["role"] = e.role
@@ -49,7 +49,7 @@ def _finite(x: float) -> float | None:
     return round(x, 6) if math.isfinite(x) else None
 
 
-def _decision(rep: ProgressReport) -> dict[str, Any]:
+def decision_dict(rep: ProgressReport) -> dict[str, Any]:
     out: dict[str, Any] = {
         "skill": rep.skill,
         "invocation": rep.invocation,
@@ -92,8 +92,8 @@ class TraceRecorder:
                 "type": "round",
                 "episode": log.episode,
                 "round": log.round,
-                "bodies": [_entity(b) for b in log.bodies],
-                "entities": [_entity(e) for e in log.entities],
+                "bodies": [entity_dict(b) for b in log.bodies],
+                "entities": [entity_dict(e) for e in log.entities],
                 "commands": cmds,
                 "messages": [
                     {"from": u, "to": ref.to, "seq": ref.seq}
@@ -113,7 +113,7 @@ class TraceRecorder:
 
     def on_report(self, rep: ProgressReport) -> None:
         if rep.phase == "round":
-            self._decisions[(rep.episode, rep.round, rep.uav)] = _decision(rep)
+            self._decisions[(rep.episode, rep.round, rep.uav)] = decision_dict(rep)
 
     def on_central(self, record: Any) -> None:
         """A baseline's central node finished a round (``baselines.central.CentralRound``):
@@ -157,4 +157,4 @@ class TraceRecorder:
         return self.path
 
 
-__all__ = ["TRACE_VERSION", "TraceRecorder"]
+__all__ = ["TRACE_VERSION", "TraceRecorder", "decision_dict", "entity_dict"]

@@ -47,6 +47,7 @@ COMMANDER = "cmdr"
 WORLD = "world"
 CENTRAL = "central"
 OBSERVER = "observer"
+OPERATOR = "operator"
 ROUTER = "router"
 
 
@@ -140,6 +141,7 @@ def default_members(
     central: bool = True,
     observer: bool = True,
     router: bool = True,
+    operator: bool = True,
 ) -> dict[str, Role]:
     """The identities of a swarm: ``uav0..uavN-1`` (or the given ids) plus the ground nodes."""
     names = [f"uav{i}" for i in range(uavs)] if isinstance(uavs, int) else list(uavs)
@@ -149,6 +151,7 @@ def default_members(
         WORLD: (world, Role.WORLD),
         CENTRAL: (central, Role.CENTRAL),
         OBSERVER: (observer, Role.OBSERVER),
+        OPERATOR: (operator, Role.OPERATOR),
         ROUTER: (router, Role.ROUTER),
     }
     for name, (wanted, role) in extra.items():

@@ -15,13 +15,16 @@ Per role (S = ``aw/<swarm>``, after the Zenoh namespace if one is set):
 | world     | S/sim/**                                | S/sim/**                 | S/alive/world  |
 | central   | S/central/**                            | S/central/**             | S/alive/central|
 | observer  | nothing                                 | nothing                  | none           |
+| operator  | S/operator/**                           | nothing                  | none           |
 | router    | S/** (it relays for everyone)           | S/**                     | S/**           |
 
 Reads (subscribe, query, and what a node sends *to* that subject) are least privilege too:
 a UAV reads beacons, its own inbox, every peer's broadcast key, shared experience, the
 context, its own assignment and its own simulator perception and reward, so private facts
 do not cross UAVs. The world reads the UAVs' simulator commands, beacons and the radio its
-world-flown listeners (the eavesdropper) hear: broadcasts and their inboxes.
+world-flown listeners (the eavesdropper) hear: broadcasts and their inboxes. The operator
+(``aeroweaver console`` / ``mcp`` / ``approve`` with its key) reads what an observer reads and
+writes only operator keys: stop commands the Commander reads and approvals a UAV reads.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ class Role(enum.StrEnum):
     WORLD = "world"
     CENTRAL = "central"
     OBSERVER = "observer"
+    OPERATOR = "operator"
     ROUTER = "router"
 
 
@@ -76,6 +80,7 @@ def grants(keys: Keys, name: str, role: Role) -> Grants:
                 keys.sim_reward(name),
                 keys.sim_episode,
                 f"{s}/central/**",
+                keys.approval(name),
             ),
             alive=alive,
         )
@@ -84,9 +89,12 @@ def grants(keys: Keys, name: str, role: Role) -> Grants:
             write=(f"{s}/cmdr/**",),
             serve=(f"{s}/cmdr/**",),
             token=(keys.alive_cmdr,),
-            read=(keys.state("*"), keys.report("*"), f"{s}/cmdr/**", keys.sim_episode),
+            read=(
+                keys.state("*"), keys.report("*"), f"{s}/cmdr/**", keys.sim_episode,
+                keys.operator_command,
+            ),
             alive=alive,
-        )
+        )  # fmt: skip
     if role is Role.WORLD:
         return Grants(
             write=(f"{s}/sim/**",),
@@ -113,6 +121,9 @@ def grants(keys: Keys, name: str, role: Role) -> Grants:
         )
     if role is Role.OBSERVER:
         return Grants(write=(), serve=(), token=(), read=(f"{s}/**",), alive=alive)
+    if role is Role.OPERATOR:
+        return Grants(write=(f"{s}/operator/**",), serve=(), token=(), read=(f"{s}/**",),
+                      alive=alive)  # fmt: skip
     if role is Role.ROUTER:
         everything = (f"{s}/**",)
         return Grants(

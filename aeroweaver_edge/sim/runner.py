@@ -48,6 +48,7 @@ from aeroweaver_edge.wire import (
     SimPerception,
     SimReward,
     Vec3,
+    WorldSnapshot,
     last_chunk,
 )
 
@@ -84,6 +85,7 @@ class RunnerStats:
     deadline_misses: int = 0
     rejected_commands: int = 0  # refused by the command check (by cause: WorldRunner.check)
     unknown_tokens: int = 0  # liveliness tokens of ids the world does not fly
+    snapshots_dropped: int = 0  # round snapshots over the payload cap (observers miss them)
     lost: dict[str, tuple[int, int]] = field(default_factory=dict)  # uav -> (episode, round) lost
 
 
@@ -324,25 +326,26 @@ class WorldRunner:
                     ),
                     block=True,
                 )
+            log_ = RoundLog(
+                episode=episode,
+                round=rnd,
+                result=res,
+                commands=commands,
+                missed=missed,
+                absent=tuple(u for u in controlled if u not in self.alive),
+                wait_s=waited,
+                deliveries=sum(len(v) for v in expect.values()),
+                wall_s=time.monotonic() - round_started,
+                bodies=tuple(b.as_entity() for b in world.bodies()),
+                entities=tuple(world.entities()),
+                refused=dict(self.refusals() - refused_before),
+                violations=tuple(violations),
+            )
+            self._publish_snapshot(log_, controlled)
             if self._on_round is not None:
-                absent = tuple(u for u in controlled if u not in self.alive)
-                await self._on_round(
-                    RoundLog(
-                        episode=episode,
-                        round=rnd,
-                        result=res,
-                        commands=commands,
-                        missed=missed,
-                        absent=absent,
-                        wait_s=waited,
-                        deliveries=sum(len(v) for v in expect.values()),
-                        wall_s=time.monotonic() - round_started,
-                        bodies=tuple(b.as_entity() for b in world.bodies()),
-                        entities=tuple(world.entities()),
-                        refused=dict(self.refusals() - refused_before),
-                        violations=tuple(violations),
-                    )
-                )
+                await self._on_round(log_)
+            if self.cfg.pace_s > 0:  # watchable runs: at least pace_s of wall time per round
+                await asyncio.sleep(max(0.0, self.cfg.pace_s - (time.monotonic() - round_started)))
         result = ep.result()
         self._publish_episode(episode, "end", result.reason)
         return result
@@ -362,6 +365,39 @@ class WorldRunner:
     def missing_messages(self) -> int:
         """Expected messages the world's listeners never got."""
         return sum(link.stats.missing for link in self._listeners.values())
+
+    def _publish_snapshot(self, log_: RoundLog, controlled: list[str]) -> None:
+        """The world after this round, for observers (the console); nothing acts on it."""
+        held = [u for u in controlled if (c := log_.commands.get(u)) is None or c.held]
+        snap = WorldSnapshot(
+            h=self.headers.next(),
+            task=self.task.name,
+            episode=log_.episode,
+            round=log_.round,
+            uavs=list(controlled),
+            bodies=list(log_.bodies),
+            entities=list(log_.entities),
+            rewards=dict(log_.result.rewards),
+            held=held,
+            messages=[
+                MsgRef(sender=u, seq=ref.seq, to=ref.to)
+                for u, c in sorted(log_.commands.items())
+                for ref in c.sent
+            ],
+            guesses={u: c.guess for u, c in log_.commands.items() if c.guess is not None},
+            missed=list(log_.missed),
+            absent=list(log_.absent),
+            complete=log_.result.complete,
+            done=log_.result.done,
+            reason=log_.result.reason or "",
+            comm_radius_m=self.comm_radius_m,
+            sensing_radius_m=self.cfg.sensing_radius_m,
+        )
+        try:
+            self.mesh.put(self.keys.sim_snapshot, snap)
+        except ValueError as exc:  # over the payload cap: observers miss a round, the run goes on
+            self.stats.snapshots_dropped += 1
+            log.warning("round snapshot not published: %s", exc)
 
     def shutdown(self) -> None:
         """Tell every daemon the run is over (they leave their round loop and exit)."""

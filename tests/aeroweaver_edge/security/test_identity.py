@@ -29,8 +29,11 @@ def test_default_members_cover_every_role() -> None:
         "central": Role.CENTRAL,
         "observer": Role.OBSERVER,
         "router": Role.ROUTER,
+        "operator": Role.OPERATOR,
     }
-    assert set(default_members(["a1"], central=False, observer=False, router=False)) == {
+    assert set(
+        default_members(["a1"], central=False, observer=False, router=False, operator=False)
+    ) == {
         "a1", "cmdr", "world",
     }  # fmt: skip
     with pytest.raises(PkiError, match="reserved"):
@@ -83,7 +86,7 @@ def test_per_identity_addresses_and_refusals(tmp_path: Path) -> None:
     assert {"10.0.0.1", "10.0.0.11", "uav1.local"} <= sans("uav1")
     assert "10.0.0.11" not in sans("uav0")
     assert "10.0.0.1" in sans("uav0")
-    assert [r["status"] for r in p.describe()] == ["ok"] * 7
+    assert [r["status"] for r in p.describe()] == ["ok"] * 8
     with pytest.raises(PkiError, match="already holds"):
         SwarmPki.create(tmp_path / "a", "s", default_members(1))
     with pytest.raises(PkiError, match="unknown identities: uav9"):

@@ -29,7 +29,7 @@ def test_keys_init_writes_a_usable_swarm(
 ) -> None:
     out = tmp_path / "swarm"
     assert init(out, "--listen", "tls/127.0.0.1:0", "--host", "10.0.0.1") == 0
-    assert "7 identities" in capsys.readouterr().out
+    assert "8 identities" in capsys.readouterr().out
     pki = SwarmPki.load(out)
     assert pki.swarm == "field"
     for name in pki.identities.members:

@@ -105,4 +105,6 @@ def test_write_table(name: str, key: str, allowed: bool) -> None:
 
 
 def test_roles_are_closed() -> None:
-    assert {r.value for r in Role} == {"uav", "commander", "world", "central", "observer", "router"}
+    assert {r.value for r in Role} == {
+        "uav", "commander", "world", "central", "observer", "router", "operator",
+    }  # fmt: skip
