@@ -89,10 +89,13 @@ class DecisionDetail(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
-    """Per-round progress, or (``phase="ready"``) the ack that a UAV holds its assignment."""
+    """Per-round progress, or (``phase="ready"``) the ack that a UAV holds its assignment,
+    or (``phase="experience"``) its shared-experience tally for ``episode``: how many of its
+    own finalised records of that episode it published, and how many same-role peers'
+    records of it it has taken (the orchestration's barrier between episodes waits on these)."""
 
     h: Header
-    phase: Literal["round", "ready"] = "round"
+    phase: Literal["round", "ready", "experience"] = "round"
     uav: str
     mission_id: str
     episode: int
@@ -117,6 +120,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     llm_class: str = ""  # the selector's current logprob class (probe kind), if any
     prompt_cached: int = 0  # of prompt_tokens, served from the endpoint's prompt cache
     decision: DecisionDetail | None = None  # options, scores, advantages, pick (round phase)
+    experience_shared: int = 0  # experience phase: own records of ``episode`` published
+    experience_taken: int = 0  # experience phase: peers' records of ``episode`` taken
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):
@@ -259,6 +264,11 @@ class Keys:
     @property
     def alive_cmdr(self) -> str:
         return f"{self.root}/alive/cmdr"
+
+    @property
+    def alive_world(self) -> str:
+        """The simulated world's token: a sim-backed daemon that loses it holds and exits."""
+        return f"{self.root}/alive/world"
 
     @property
     def alive_all(self) -> str:

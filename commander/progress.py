@@ -47,6 +47,8 @@ class ProgressBoard:
         if rep.phase == "ready":
             self.ready[rep.uav] = rep.role
             return True
+        if rep.phase == "experience":
+            return True  # a shared-experience tally: for the barrier between episodes
         p = self.uavs.setdefault(rep.uav, UavProgress(rep.uav))
         p.role = rep.role
         p.last = rep

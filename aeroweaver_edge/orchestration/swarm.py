@@ -15,7 +15,6 @@ import asyncio
 import contextlib
 import math
 import socket
-import tempfile
 import time
 import uuid
 from collections.abc import Awaitable, Callable, Iterable
@@ -29,11 +28,14 @@ from aeroweaver_edge.config import AgentConfig, LLMConfig, MeshConfig, SimConfig
 from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.orchestration.barrier import DEFAULT_TIMEOUT_S as BARRIER_TIMEOUT_S
+from aeroweaver_edge.orchestration.barrier import ExperienceBarrier
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.orchestration.run_health import health_fields
 from aeroweaver_edge.orchestration.trace import TraceRecorder
+from aeroweaver_edge.run_dir import RunDir, sweep_stale
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.tasks import create, get_spec
@@ -108,6 +110,8 @@ class RunSummary:
     round_wall_s: list[float] = field(default_factory=list)
     peak_rss_kb: dict[str, int] = field(default_factory=dict)
     link: dict[str, Any] = field(default_factory=dict)  # flight link: what crossed MAVLink
+    rejoined_uavs: dict[str, int] = field(default_factory=dict)  # uav -> times it came back
+    experience_barrier: dict[str, Any] = field(default_factory=dict)  # BarrierStats.as_dict
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -139,6 +143,8 @@ class RunSummary:
             "deadline_misses": self.deadline_misses,
             "deadline_misses_by_side": self.deadline_misses_by_side,
             "lost_uavs": self.lost_uavs,
+            "rejoined_uavs": self.rejoined_uavs,
+            "experience_barrier": self.experience_barrier,
             "tokens": self.tokens,
             "tokens_per_decision": self.tokens_per_decision,
             "tokens_by_agent": self.tokens_by_agent,
@@ -316,7 +322,10 @@ async def run_swarm(
         )
         namespace = f"aw-{uuid.uuid4().hex[:10]}"
         seed_mesh_cfg, peer_mesh_cfg = mesh_configs(namespace)
-        tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="aeroweaver-")))
+        # Runs killed earlier left their directories behind only if no daemon outlived
+        # them; this run's is never left behind (run_dir.py).
+        await asyncio.to_thread(sweep_stale)
+        tmp = stack.enter_context(RunDir.create()).path
         memory_dir = opts.memory_dir or tmp
         memory_dir.mkdir(parents=True, exist_ok=True)
 
@@ -326,6 +335,8 @@ async def run_swarm(
         stack.push_async_callback(cmdr_mesh.aclose)
 
         board_ref: dict[str, ProgressBoard] = {}
+        # The daemons that played the latest round: they share that episode's experience.
+        last_round: set[str] = set()
 
         recorder = None
         if opts.trace_path is not None:
@@ -335,6 +346,8 @@ async def run_swarm(
             if recorder is not None:
                 recorder.on_round(log)
             summary.round_wall_s.append(log.wall_s)
+            last_round.clear()
+            last_round.update(log.commands)
             summary.deliveries += log.deliveries
             if fault is not None:
                 await fault(log, daemons)
@@ -361,6 +374,8 @@ async def run_swarm(
         stack.push_async_callback(commander.aclose)
         if on_commander is not None:
             on_commander(commander)
+        barrier = ExperienceBarrier(task.roles(), max(BARRIER_TIMEOUT_S, 2 * opts.deadline_s))
+        commander.report_listeners.append(barrier.on_report)
 
         pin_slots = source == "embedded" if opts.slots is None else opts.slots
         pin_slots = pin_slots and source != "scripted"
@@ -405,9 +420,10 @@ async def run_swarm(
                 summary.episodes.append(_episode_dict(ep, result, task))
                 if recorder is not None:
                     recorder.on_episode(ep, result)
-                if ep + 1 < opts.episodes:
-                    # Let finalised experience reach same-role peers before the next episode.
-                    await asyncio.sleep(0.3)
+                if opts.share_experience:
+                    # Finalised experience is in every same-role peer before the next
+                    # episode (and, after the last, before the daemons store and stop).
+                    await barrier.wait(ep, last_round, lambda: set(runner.alive))
         except asyncio.CancelledError:
             # Operator stop (Ctrl-C / SIGTERM): every UAV is told to hold, then all close.
             commander.end_mission("operator stop")
@@ -446,6 +462,8 @@ async def run_swarm(
             + sum((p.last.decode_errors if p.last else 0) for p in board.uavs.values())
         )
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
+        summary.rejoined_uavs = dict(runner.stats.rejoined)
+        summary.experience_barrier = barrier.stats.as_dict() if opts.share_experience else {}
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
         cached = sum(p.prompt_cached for p in board.uavs.values())
