@@ -76,7 +76,8 @@ class SharedIntake:
 
     async def store(self, memory: AsyncExperienceMemory) -> int:
         """Store every pending record in canonical order; returns how many changed memory."""
-        batch = [self._pending[k] for k in sorted(self._pending)]
+        order = sorted(self._pending, key=lambda k: (k[0], k[2], k[1], k[3]))  # run, ep, uav, rnd
+        batch = [self._pending[k] for k in order]
         self._pending.clear()
         changed = 0
         for rec in batch:
