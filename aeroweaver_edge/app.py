@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.daemon import DaemonPorts, DaemonStats, UavDaemon
 from aeroweaver_edge.decision_round import RoundOutcome
+from aeroweaver_edge.lifecycle import TokenWatch, run_unless_lost
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.ports import Selector
 from aeroweaver_edge.security.wiring import boot_headers, peer_limits
@@ -140,5 +141,13 @@ async def run_daemon(
             attach(lambda: daemon.neighbours)
         if on_ready is not None:
             on_ready(daemon)
-        return await daemon.run()
+        if not (cfg.vehicle.backend == "sim" or cfg.vehicle.sim_world):
+            return await daemon.run()  # a field daemon never stops for a lost party
+        # Flying in the simulated world: hold when it goes, stop if it stays gone.
+        world = TokenWatch(mesh, Keys(cfg.swarm).alive_world)
+        world.start()
+        stack.push_async_callback(world.aclose)
+        return await run_unless_lost(
+            daemon.run(), world, cfg.vehicle.world_grace_s, hold=daemon.phases.hold, who=cfg.uav
+        )
     raise AssertionError("unreachable")  # pragma: no cover

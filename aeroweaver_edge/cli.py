@@ -169,6 +169,18 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_daemon(args: argparse.Namespace) -> int:
+    from aeroweaver_edge.run_dir import attach_to_run
+
+    # Started by a simulated run: die with it, and the last one out removes its directory.
+    member = attach_to_run(os.environ)
+    try:
+        return _daemon(args)
+    finally:
+        if member is not None:
+            member.leave()
+
+
+def _daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.app import run_daemon
     from aeroweaver_edge.mesh import build_zenoh_config
     from aeroweaver_edge.systemd_notify import Supervision
@@ -369,6 +381,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import memory_kill
 
         return memory_kill.main(["--kills", str(args.kills)])
+    if args.what == "kill-restart":
+        from aeroweaver_edge.bench import kill_restart
+
+        return kill_restart.main(["--cycles", str(args.kills)])
     if args.what == "reference":
         from aeroweaver_edge.bench import reference
 
@@ -620,6 +636,7 @@ def build_parser() -> argparse.ArgumentParser:
             "run",
             "memory",
             "memory-kill",
+            "kill-restart",
             "scale",
             "reference",
             "mavlink",
@@ -630,7 +647,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="run: the benchmark (tasks x conditions x seeds; 'aeroweaver bench run --help')",
     )
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
-    b.add_argument("--kills", type=int_in(1), default=200, help="memory-kill: SIGKILLs")
+    b.add_argument(
+        "--kills", type=int_in(1), default=200, help="memory-kill, kill-restart: SIGKILLs"
+    )
     b.add_argument(
         "--sizes",
         type=int_in(1, MAX_UAVS),

@@ -276,6 +276,9 @@ class VehicleConfig(_Section):
     # Clock, perception and rewards from the simulated world (lockstep) while the vehicle
     # flies over MAVLink/MAVSDK: ``aeroweaver sim --link mavlink``. Always on for "sim".
     sim_world: bool = False
+    # A daemon flying in the simulated world holds when the world's liveliness token goes
+    # and stops if it is not back within this grace (a partition shorter than this heals).
+    world_grace_s: float = Field(default=10.0, gt=0, le=3600.0)
 
     @model_validator(mode="after")
     def _link(self) -> VehicleConfig:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.agent.history import InteractionHistory
+from aeroweaver_edge.agent.shared_intake import MAX_EPISODES, SharedIntake
 from aeroweaver_edge.approval import ApprovalGate
 from aeroweaver_edge.approval_link import ApprovalLink
 from aeroweaver_edge.config import UavConfig
@@ -42,6 +43,7 @@ from aeroweaver_edge.ports import (
     Perception,
     Reach,
     RewardSource,
+    RoundTick,
     Selector,
     Vehicle,
 )
@@ -167,6 +169,8 @@ class UavDaemon:
         self.approvals = ApprovalGate(cfg.uav, cfg.approval, mission=self._mission_id)
         self._approval_link: ApprovalLink | None = None
         gated = approve is None
+        self.intake = SharedIntake(cfg.uav)  # same-role peers' records, stored per round
+        self._shared: dict[int, int] = {}  # episode -> own records published
         # Flight phases (preflight, arm, take off, offboard, mission, land/return) wrap the
         # Vehicle port; the round flies through them. ``approve`` gates vehicle actions.
         self.phases = FlightPhases(
@@ -299,14 +303,44 @@ class UavDaemon:
         )
 
     async def _pump_experience(self, sub: Subscription[ExperienceRecord]) -> None:
-        async for key, rec in sub:
+        """Take same-role peers' records as they come (stored at the next round start, in
+        canonical order: ``SharedIntake``); tell the Commander the new tallies once per
+        burst, for the orchestration's barrier between episodes."""
+        async for first in sub:
             view = self.mission.view()
-            if self.memory is None or rec.uav == self.uav:
-                continue
-            if not rec.uav == rec.h.sender == key.split("/")[-2]:
-                continue  # a UAV shares only its own experience, on its own key
-            if view is not None and rec.role == view.role and await self.memory.ingest(rec):
-                self.stats.experience_ingested += 1
+            role = view.role if view is not None else None
+            touched = {
+                rec.episode
+                for key, rec in (first, *sub.drain())
+                if self.intake.offer(key, rec, role) and rec.run == self._run
+            }
+            for episode in sorted(touched):
+                self._tally(episode)
+
+    @property
+    def _run(self) -> str:
+        return self.memory.run if self.memory is not None else ""
+
+    def _tally(self, episode: int) -> None:
+        """Report this daemon's shared-experience tally for ``episode`` (experience phase):
+        its own records published (-1: not yet) and same-role peers' records taken."""
+        view, ctx = self.mission.view(), self.mission.context
+        self.mesh.put(
+            self.keys.report(self.uav),
+            ProgressReport(
+                h=self.headers.next(), phase="experience", uav=self.uav,
+                mission_id=view.mission_id if view else (ctx.mission_id if ctx else ""),
+                episode=episode, round=-1, role=view.role if view else "", skill="",
+                invocation="", label=None, held=True,
+                experience_shared=self._shared.get(episode, -1),
+                experience_taken=self.intake.taken(self._run, episode),
+            ),
+            block=True,
+        )  # fmt: skip
+
+    async def _store_shared(self) -> None:
+        if self.memory is not None and self.intake.pending:
+            self.stats.experience_ingested += await self.intake.store(self.memory)
 
     async def _catch_up(self) -> None:
         """A late or restarted daemon asks for the current context and its assignment."""
@@ -372,6 +406,7 @@ class UavDaemon:
             while True:
                 tick = await self.ports.clock.next_round()
                 await self._absorb_rewards()
+                await self._store_shared()
                 if tick is None:
                     self._final_report()
                     break
@@ -394,6 +429,7 @@ class UavDaemon:
                     )
                 self._report(out, view, calls)
                 await self._remember(out, view)
+                await self._settle(tick)
                 if self._on_round is not None:
                     await self._on_round(out)
         finally:
@@ -504,6 +540,15 @@ class UavDaemon:
             invocation=out.invocation,
         )
 
+    async def _settle(self, tick: RoundTick) -> None:
+        """A lockstep clock (the simulated world) can wait for this round's reward: taking
+        it now, not at the next round's start, finalises and shares an episode's records
+        before the world starts the next episode (the barrier waits for them)."""
+        settle = getattr(self.ports.clock, "settle", None)
+        if settle is not None:
+            await settle(tick)
+            await self._absorb_rewards()
+
     async def _absorb_rewards(self) -> None:
         for ev in self.ports.rewards.drain():
             self._last_reward = ev.reward
@@ -519,8 +564,13 @@ class UavDaemon:
     async def _share(self, episode: int) -> None:
         if self.memory is None or not self.cfg.agent.share_experience:
             return
-        for rec in await self.memory.export_final(self.uav, episode):
+        records = await self.memory.export_final(self.uav, episode)
+        for rec in records:
             self.mesh.put(
                 self.keys.experience(self.uav), rec.to_wire(self.headers.next()), block=True
             )
             self.stats.experience_shared += 1
+        self._shared[episode] = len(records)
+        while len(self._shared) > MAX_EPISODES:
+            del self._shared[min(self._shared)]
+        self._tally(episode)

@@ -102,11 +102,14 @@ class DecisionDetail(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
-    """Per-round progress, (``phase="ready"``) the ack that a UAV holds its assignment, or
-    (``phase="final"``) the daemon's last counters as it stops."""
+    """Per-round progress; (``phase="ready"``) the ack that a UAV holds its assignment;
+    (``phase="final"``) the daemon's last counters as it stops; or (``phase="experience"``)
+    its shared-experience tally for ``episode``: how many of its own finalised records of
+    that episode it published, and how many same-role peers' records of it it has taken
+    (the orchestration's barrier between episodes waits on these)."""
 
     h: Header
-    phase: Literal["round", "ready", "final"] = "round"
+    phase: Literal["round", "ready", "final", "experience"] = "round"
     uav: str
     mission_id: str
     episode: int
@@ -133,6 +136,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     decision: DecisionDetail | None = None  # options, scores, advantages, pick (round phase)
     rejected: Causes = {}  # cumulative: everything this daemon refused, by cause
     missing_messages: int = 0  # cumulative: expected messages that never came
+    experience_shared: int = 0  # experience phase: own records of ``episode`` published
+    experience_taken: int = 0  # experience phase: peers' records of ``episode`` taken
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):
@@ -415,6 +420,11 @@ class Keys:
     @property
     def alive_cmdr(self) -> str:
         return f"{self.root}/alive/cmdr"
+
+    @property
+    def alive_world(self) -> str:
+        """The simulated world's token: a sim-backed daemon that loses it holds and exits."""
+        return f"{self.root}/alive/world"
 
     @property
     def alive_all(self) -> str:

@@ -50,6 +50,8 @@ class ProgressBoard:
         if rep.phase == "ready":
             self.ready[rep.uav] = rep.role
             return True
+        if rep.phase == "experience":
+            return True  # a shared-experience tally: for the barrier between episodes
         fresh = rep.phase == "round" and rep.episode not in self.episode_tokens
         if fresh and len(self.episode_tokens) >= self.max_episodes:
             self.foreign += 1  # a flood of made-up episode numbers

@@ -9,11 +9,16 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aeroweaver_edge.config import UavConfig
+from aeroweaver_edge.run_dir import ENV_DIR, ENV_PARENT, LOCK_NAME
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.skills import SkillRegistry
 
 
 def peak_rss_kb(pid: int) -> int | None:
@@ -38,33 +43,49 @@ class DaemonSet:
         self.tasks: dict[str, asyncio.Task[Any]] = {}
         self.procs: dict[str, asyncio.subprocess.Process] = {}
         self.killed: set[str] = set()  # by fault injection: lost on purpose, not failed
+        self._registry: SkillRegistry | None = None
 
     async def start(self) -> None:
         if not self.processes:
-            from aeroweaver_edge.app import run_daemon
             from aeroweaver_edge.skills import load_skills
 
-            registry = load_skills()
+            self._registry = load_skills()
             for cfg in self.configs:
-                self.tasks[cfg.uav] = asyncio.create_task(
-                    run_daemon(cfg, registry=registry), name=cfg.uav
-                )
+                self._start_task(cfg)
             return
         for cfg in self.configs:
             path = self.workdir / f"{cfg.uav}.json"
             path.write_text(cfg.model_dump_json(indent=2), encoding="utf-8")
-            log = (self.workdir / f"{cfg.uav}.log").open("wb")  # the child inherits it
-            self.procs[cfg.uav] = await asyncio.create_subprocess_exec(
+            self.procs[cfg.uav] = await self._spawn(cfg.uav, "wb")
+
+    def _start_task(self, cfg: UavConfig) -> None:
+        from aeroweaver_edge.app import run_daemon
+
+        self.tasks[cfg.uav] = asyncio.create_task(
+            run_daemon(cfg, registry=self._registry), name=cfg.uav
+        )
+
+    async def _spawn(self, uav: str, log_mode: str) -> asyncio.subprocess.Process:
+        """``aeroweaver daemon`` for ``uav``: it dies with this process (Linux), and it holds
+        the run directory's lock while it runs (``run_dir``), so it is never left behind."""
+        env = {**os.environ, ENV_PARENT: str(os.getpid())}
+        if (self.workdir / LOCK_NAME).exists():
+            env[ENV_DIR] = str(self.workdir)
+        log = (self.workdir / f"{uav}.log").open(log_mode)  # the child inherits it
+        try:
+            return await asyncio.create_subprocess_exec(
                 sys.executable,
                 "-m",
                 "aeroweaver_edge.cli",
                 "daemon",
                 "--config",
-                str(path),
+                str(self.workdir / f"{uav}.json"),
                 stdin=asyncio.subprocess.DEVNULL,
                 stdout=log,
                 stderr=log,
+                env=env,
             )
+        finally:
             log.close()
 
     def peak_rss_kb(self) -> dict[str, int]:
@@ -80,12 +101,25 @@ class DaemonSet:
         """Fault injection: the daemon dies abruptly (process SIGKILL, or task cancelled)."""
         self.killed.add(uav)
         if uav in self.procs:
-            self.procs[uav].kill()
-            await self.procs[uav].wait()
+            proc = self.procs[uav]
+            if proc.returncode is None:
+                proc.kill()
+            await proc.wait()
         elif uav in self.tasks:
             self.tasks[uav].cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await self.tasks[uav]
+
+    async def restart(self, uav: str) -> None:
+        """Fault injection: start a killed daemon again from its config; it rejoins the
+        swarm (the world flies its body again once its token is back)."""
+        if uav not in self.killed:
+            raise RuntimeError(f"{uav} is running; kill it before restarting it")
+        if self.processes:
+            self.procs[uav] = await self._spawn(uav, "ab")  # its log keeps every life
+        else:
+            self._start_task(next(c for c in self.configs if c.uav == uav))
+        self.killed.discard(uav)
 
     def failed(self) -> dict[str, str]:
         """Daemons that ended before the run did, with the reason."""

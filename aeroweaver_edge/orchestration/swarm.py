@@ -19,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import tempfile
 import time
 import uuid
 from collections.abc import Awaitable, Callable, Iterable
@@ -41,6 +40,8 @@ from aeroweaver_edge.config import (
 from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.orchestration.barrier import DEFAULT_TIMEOUT_S as BARRIER_TIMEOUT_S
+from aeroweaver_edge.orchestration.barrier import ExperienceBarrier
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
 from aeroweaver_edge.orchestration.network import RunNetwork, run_network
@@ -49,6 +50,7 @@ from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.orchestration.run_health import health_fields, security_fields
 from aeroweaver_edge.orchestration.trace import TraceRecorder
 from aeroweaver_edge.orchestration.variants import WIDE_SLOT_CTX, add_central, with_full_catalogue
+from aeroweaver_edge.run_dir import RunDir, sweep_stale
 from aeroweaver_edge.security.identity import CENTRAL, COMMANDER, WORLD
 from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.episode import EpisodeResult
@@ -144,6 +146,8 @@ class RunSummary:
     central: dict[str, Any] = field(default_factory=dict)  # a baseline's central node: totals
     tokens_by_side: dict[str, dict[str, int]] = field(default_factory=dict)  # uavs / central
     stopped: str | None = None  # the operator's stop (console, MCP), if the run ended so
+    rejoined_uavs: dict[str, int] = field(default_factory=dict)  # uav -> times it came back
+    experience_barrier: dict[str, Any] = field(default_factory=dict)  # BarrierStats.as_dict
 
     def as_dict(self) -> dict[str, Any]:
         eps = self.episodes
@@ -175,6 +179,8 @@ class RunSummary:
             "deadline_misses": self.deadline_misses,
             "deadline_misses_by_side": self.deadline_misses_by_side,
             "lost_uavs": self.lost_uavs,
+            "rejoined_uavs": self.rejoined_uavs,
+            "experience_barrier": self.experience_barrier,
             "tokens": self.tokens,
             "tokens_per_decision": self.tokens_per_decision,
             "tokens_by_agent": self.tokens_by_agent,
@@ -399,7 +405,10 @@ async def run_swarm(
             pace_s=opts.pace_s,
         )
         namespace = f"aw-{uuid.uuid4().hex[:10]}"
-        tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="aeroweaver-")))
+        # Runs killed earlier left their directories behind only if no daemon outlived
+        # them; this run's is never left behind (run_dir.py).
+        await asyncio.to_thread(sweep_stale)
+        tmp = stack.enter_context(RunDir.create()).path
         memory_dir = opts.memory_dir or tmp
         memory_dir.mkdir(parents=True, exist_ok=True)
         net = await stack.enter_async_context(
@@ -418,6 +427,8 @@ async def run_swarm(
         )
 
         board_ref: dict[str, ProgressBoard] = {}
+        # The daemons that played the latest round: they share that episode's experience.
+        last_round: set[str] = set()
 
         recorder = None
         if opts.trace_path is not None:
@@ -427,6 +438,8 @@ async def run_swarm(
             if recorder is not None:
                 recorder.on_round(log)
             summary.round_wall_s.append(log.wall_s)
+            last_round.clear()
+            last_round.update(log.commands)
             summary.deliveries += log.deliveries
             if fault is not None:
                 await fault(log, daemons)
@@ -456,6 +469,8 @@ async def run_swarm(
             on_commander(commander)
         if on_started is not None:  # observers join before the first round
             await on_started(SwarmHandle(opts.swarm, commander, net.config))
+        barrier = ExperienceBarrier(task.roles(), max(BARRIER_TIMEOUT_S, 2 * opts.deadline_s))
+        commander.report_listeners.append(barrier.on_report)
 
         pin_slots = source == "embedded" if opts.slots is None else opts.slots
         pin_slots = pin_slots and source != "scripted"
@@ -522,9 +537,10 @@ async def run_swarm(
                 summary.episodes.append(_episode_dict(ep, result, task))
                 if recorder is not None:
                     recorder.on_episode(ep, result)
-                if ep + 1 < opts.episodes:
-                    # Let finalised experience reach same-role peers before the next episode.
-                    await asyncio.sleep(0.3)
+                if opts.share_experience:
+                    # Finalised experience is in every same-role peer before the next
+                    # episode (and, after the last, before the daemons store and stop).
+                    await barrier.wait(ep, last_round, lambda: set(runner.alive))
         except asyncio.CancelledError:
             # Operator stop (Ctrl-C / SIGTERM): every UAV is told to hold, then all close.
             commander.end_mission("operator stop")
@@ -564,6 +580,8 @@ async def run_swarm(
         )
         summary.lost_uavs = {u: list(where) for u, where in runner.stats.lost.items()}
         summary.envelope_violations = runner.envelope.summary()
+        summary.rejoined_uavs = dict(runner.stats.rejoined)
+        summary.experience_barrier = barrier.stats.as_dict() if opts.share_experience else {}
         prompt = sum(p.prompt_tokens for p in board.uavs.values())
         completion = sum(p.completion_tokens for p in board.uavs.values())
         cached = sum(p.prompt_cached for p in board.uavs.values())

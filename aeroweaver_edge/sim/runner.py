@@ -6,7 +6,8 @@ frozen perception (what it senses within its role's radius, its private facts, a
 messages that reach it from last round), waits for each UAV's command until the deadline
 (the world stays frozen meanwhile), applies them (a missing or held command holds that UAV;
 a guess is recorded by the task), advances 0.5 s, scores the round and sends the rewards. A
-UAV whose liveliness token disappears is marked absent and holds for the rest of the run.
+UAV whose liveliness token disappears is marked absent and holds until its token is back
+(a restarted daemon rejoins at the next round). The world's own token tells daemons it lives.
 
 Which messages reach whom is computed here with the task's routing rule on the positions of
 the round they were sent, exactly as each receiver's inbox judges them, so every recipient
@@ -87,6 +88,7 @@ class RunnerStats:
     unknown_tokens: int = 0  # liveliness tokens of ids the world does not fly
     snapshots_dropped: int = 0  # round snapshots over the payload cap (observers miss them)
     lost: dict[str, tuple[int, int]] = field(default_factory=dict)  # uav -> (episode, round) lost
+    rejoined: dict[str, int] = field(default_factory=dict)  # uav -> times it came back
 
 
 class WorldRunner:
@@ -145,6 +147,8 @@ class WorldRunner:
             asyncio.create_task(self._pump_commands(), name="world-commands"),
             asyncio.create_task(self._pump_liveliness(), name="world-liveliness"),
         ]
+        # Daemons flying in this world hold when this token goes, and stop if it stays gone.
+        self.mesh.declare_token(self.keys.alive_world)
 
     async def aclose(self) -> None:
         await cancel_all(self._tasks)
@@ -264,6 +268,9 @@ class WorldRunner:
             for uav in controlled:
                 if uav not in self.alive:
                     world.mark_absent(uav)
+                elif world.body(uav).absent:  # a restarted daemon is back: it flies again
+                    world.mark_present(uav)
+                    self.stats.rejoined[uav] = self.stats.rejoined.get(uav, 0) + 1
             scripted = ep.scripted(await self._hear(rnd, world, expect))
             told: dict[str, list[str]] = {}  # the UAVs each one perceives
             for uav in present:

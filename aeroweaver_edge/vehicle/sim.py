@@ -190,6 +190,11 @@ class SimLink:
             block=True,
         )
 
+    async def settle(self, tick: RoundTick) -> None:
+        """Wait (bounded) for ``tick``'s reward: the daemon takes it at the end of the round,
+        so an episode's last reward is absorbed before the world starts the next one."""
+        await self._await_reward((tick.episode, tick.round))
+
     # Perception
     async def sense(self, tick: RoundTick) -> Percept:
         msg = self._require()

@@ -1,0 +1,144 @@
+"""Network faults on real links between network namespaces (root, Linux; skipped with the
+reason elsewhere): a 3+2 partition that heals, and a lossy, slow link (10% loss and 50 ms
+delay each way: ``tc netem`` where the kernel has it, else a userspace TUN forwarder that
+drops and delays real IP packets). The daemons are ``aeroweaver daemon`` processes inside
+the namespaces; the world and the Commander run here. Each test prints one JSON line of
+figures (``pytest -s``)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import sqlite3
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from aeroweaver_edge.agent.memory_tools import check
+from aeroweaver_edge.orchestration.swarm import percentiles
+from aeroweaver_edge.sim.runner import RoundLog
+from tests.helpers.netlab import NetLab, Segment
+from tests.helpers.ns_swarm import NsRun, run_ns_swarm, wait_until
+
+pytestmark = pytest.mark.slow
+WHY_NOT = NetLab.unavailable()
+
+
+@pytest.fixture
+def lab() -> Iterator[NetLab]:
+    if WHY_NOT is not None:
+        pytest.skip(f"no network namespaces here: {WHY_NOT}")
+    lab = NetLab()
+    try:
+        yield lab
+    finally:
+        lab.close()
+
+
+def stored_everything_reported(run: NsRun) -> list[str]:
+    """Decisions a daemon reported (no daemon was killed: all acknowledged) that are not
+    in its memory."""
+    lost = []
+    for uav, path in run.memory.items():
+        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as conn:
+            have = set(
+                conn.execute(
+                    "SELECT episode, round FROM records WHERE run = ? AND origin = ''",
+                    (run.run_id,),
+                ).fetchall()
+            )
+        lost += [
+            f"{uav}/{r.episode}/{r.round}"
+            for r in run.reports
+            if r.uav == uav and r.phase == "round" and r.label is not None
+            and (r.episode, r.round) not in have
+        ]  # fmt: skip
+    return lost
+
+
+async def test_a_partition_of_two_uavs_heals_and_they_rejoin(lab: NetLab, tmp_path: Path) -> None:
+    """Safety test 16 (shortened): 3 + 2 UAVs; the 2 are cut off from the world and the
+    Commander, then the link heals. Nobody crashes or exits; the world marks the 2 lost
+    within the lease and flies on with the 3; the cut-off daemons hold (they lost the
+    world) and, once healed, rejoin and decide again; one decision per UAV per round."""
+    a, b = lab.veth(), lab.veth()
+    placement: dict[str, Segment] = {f"uav{i}": a for i in range(3)} | {
+        f"uav{i}": b for i in range(3, 5)
+    }
+    cut_off = {"uav3", "uav4"}
+    times: dict[str, float] = {}
+    during: list[RoundLog] = []
+
+    async def partition(log: RoundLog, run: NsRun) -> None:
+        if "cut" not in times and log.round == 2:
+            times["cut"] = time.monotonic()
+            lab.down(b)
+            assert await wait_until(lambda: not (cut_off & run.alive()), 30.0), "not detected"
+            times["detected"] = time.monotonic()
+        elif "detected" in times and "healed" not in times:
+            during.append(log)
+            if len(during) == 4:  # four rounds flown without the two
+                times["healed"] = time.monotonic()
+                lab.up(b)
+                assert await wait_until(lambda: cut_off <= run.alive(), 60.0), "never rejoined"
+                times["back"] = time.monotonic()
+
+    run = await run_ns_swarm(
+        placement, tmp_path, task="line_formation", episodes=2, deadline_s=3.0,
+        lease_ms=2000, world_grace_s=120.0, on_round=partition,
+    )  # fmt: skip
+    assert {"cut", "detected", "healed", "back"} <= set(times)
+    assert run.early_exits == {}, run.early_exits  # nobody crashed or gave up
+    assert all(code == 0 for code in run.exit_codes.values()), run.exit_codes
+    # while cut off: the three kept deciding, the two were absent (holding)
+    for log in during:
+        assert set(log.commands) == {"uav0", "uav1", "uav2"}, log.round
+        assert cut_off <= set(log.absent)
+    # after the heal both decide again, each at most once a round (the world keeps one)
+    healed_at = run.rounds.index(during[-1]) + 1
+    after = run.rounds[healed_at:]
+    assert any(cut_off <= set(log.commands) for log in after)
+    assert set(run.runner.stats.lost) == cut_off
+    assert run.runner.stats.rejoined == dict.fromkeys(sorted(cut_off), 1)
+    for uav in cut_off:
+        text = run.log(uav)
+        assert "the simulated world went away; holding" in text
+        assert "the simulated world is back; carrying on" in text
+    for uav in ("uav0", "uav1", "uav2"):
+        assert "went away" not in run.log(uav)
+    assert stored_everything_reported(run) == []
+    assert all(not p for p in check(list(run.memory.values())).values())
+    print(json.dumps({
+        "test": "partition 3+2", "lease_s": 2.0,
+        "detect_s": round(times["detected"] - times["cut"], 2),
+        "rejoin_after_heal_s": round(times["back"] - times["healed"], 2),
+        "rounds_while_cut": len(during), "rounds": len(run.rounds),
+        "stale_commands_refused": run.runner.stats.rejected_commands,
+        "world_deadline_misses": run.runner.stats.deadline_misses,
+    }))  # fmt: skip
+
+
+@pytest.mark.parametrize(("loss", "delay"), [(0, 0), (10, 50)], ids=["clean", "loss10-delay50"])
+async def test_a_lossy_slow_link_delays_rounds_but_loses_nothing(
+    lab: NetLab, tmp_path: Path, loss: float, delay: float
+) -> None:
+    seg = lab.impaired(loss, delay, seed=7)
+    placement = {f"uav{i}": seg for i in range(3)}
+    run = await run_ns_swarm(placement, tmp_path, task="coverage", episodes=2, deadline_s=5.0)
+    assert len(run.results) == 2
+    assert run.early_exits == {}
+    assert all(c == 0 for c in run.exit_codes.values())
+    assert run.runner.stats.lost == {}  # the lease (10 s) never expired
+    assert stored_everything_reported(run) == []
+    assert all(not p for p in check(list(run.memory.values())).values())
+    decided = sum(len(log.commands) for log in run.rounds)
+    await asyncio.sleep(0)
+    print(json.dumps({
+        "test": "link", "link": seg.kind, "loss_pct": loss, "delay_ms_each_way": delay,
+        "rounds": len(run.rounds), "commands": decided,
+        "world_deadline_misses": run.runner.stats.deadline_misses,
+        "round_wall_s": percentiles(log.wall_s for log in run.rounds),
+        "records_lost": 0,
+    }))  # fmt: skip
