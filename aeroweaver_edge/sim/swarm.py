@@ -273,6 +273,29 @@ async def _shared_llm(opts: SwarmOptions) -> AsyncIterator[tuple[LLMConfig, str]
         )
 
 
+async def _seed_slots(llm: LLMConfig, plan: MissionPlan, uavs: list[str], *, history: bool) -> None:
+    """Compute each role's prompt prefix once and copy it into its UAVs' slots (UAV i uses
+    slot i), so round 0 does not process the same system prompt once per UAV."""
+    from aeroweaver_edge.agent.prompt import prefix_messages
+    from aeroweaver_edge.llm.slot_seed import SlotGroup, seed_slots
+    from aeroweaver_edge.observation import MissionView
+
+    registry = load_skills()
+    groups: dict[tuple[str, str, tuple[str, ...]], tuple[list[dict[str, str]], list[int]]] = {}
+    pinned = [(uav, a) for uav, a in plan.assignments.items() if uav in uavs]
+    for uav, a in sorted(pinned, key=lambda item: uavs.index(item[0])):
+        key = (a.role, a.local_goal, tuple(a.skills))
+        if key not in groups:
+            view = MissionView(plan.mission_id, plan.task, plan.text, a.role, a.local_goal,
+                               tuple(a.skills), tuple(plan.constraints))  # fmt: skip
+            docs = [registry.get(s).prompt_text() for s in a.skills if s in registry]
+            groups[key] = (prefix_messages(view, uav, docs, history=history), [])
+        groups[key][1].append(uavs.index(uav))
+    assert llm.base_url is not None
+    root = llm.base_url[: -len("/v1")] if llm.base_url.endswith("/v1") else llm.base_url
+    await seed_slots(root, llm.model, [SlotGroup(m, slots) for m, slots in groups.values()])
+
+
 async def _probe(llm: LLMConfig) -> str:
     from aeroweaver_edge.llm.client import ChatClient
     from aeroweaver_edge.llm.probe import probe_endpoint
@@ -389,6 +412,8 @@ async def run_swarm(
         missing = await commander.wait_ready(plan.participants, wait_s)
         if missing:
             raise RuntimeError(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
+        if pin_slots:  # best effort: needs llama-server's slot files (the embedded one has them)
+            await _seed_slots(llm, plan, uavs, history=opts.history_rounds > 0)
 
         try:
             for ep in range(opts.episodes):
