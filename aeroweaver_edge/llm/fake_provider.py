@@ -11,6 +11,8 @@ its last prompt; a request with ``id_slot`` uses that slot (wrapping, like llama
 ``get_slot_by_id``), otherwise the slot sharing the longest prefix (over 10 % of the
 prompt) or else the least recently used one. The shared prefix counts as cached tokens
 (about 4 characters per token) in ``usage`` and, with ``llama_extras``, in ``timings``.
+``POST /slots/<id>?action=save|restore`` with ``{"filename": ...}`` copies a slot's cache
+through a named file, as llama-server does with ``--slot-save-path``.
 
 Usage::
 
@@ -167,6 +169,7 @@ class FakeProvider:
         self._slot_prompts: dict[int, str] = {}
         self._slot_used: dict[int, int] = {}  # slot -> chat call that last used it
         self.slots_served: list[int] = []  # the cache slot of every answered chat request
+        self.slot_files: dict[str, str] = {}  # saved slot caches by file name
         self.requests: list[RecordedRequest] = []
         self.chat_calls = 0
         self.connections = 0  # TCP connections accepted (keep-alive reuses one)
@@ -296,7 +299,8 @@ class FakeProvider:
             body: Any = json.loads(data) if data else None
         except ValueError:
             body = data.decode("utf-8", "replace")
-        path = target.split("?", 1)[0]
+        path, _, query_text = target.partition("?")
+        query = {k: v for k, _, v in (q.partition("=") for q in query_text.split("&") if q)}
         record = RecordedRequest(method, path, headers, body)
         self.requests.append(record)
         keep = headers.get("connection", "").lower() != "close"
@@ -311,7 +315,7 @@ class FakeProvider:
             record.cached_tokens = self._last_cached
             await self._send(writer, answer, keep, drip_s=policy.drip_s)
         else:
-            await self._send(writer, self._route(method, path, policy, body), keep)
+            await self._send(writer, self._route(method, path, policy, body, query), keep)
         return keep
 
     async def _until_gone(self, reader: asyncio.StreamReader) -> None:
@@ -350,9 +354,13 @@ class FakeProvider:
 
     # ---------------------------------------------------------------- routes
 
-    def _route(self, method: str, path: str, policy: Policy, body: Any) -> _Answer:
+    def _route(
+        self, method: str, path: str, policy: Policy, body: Any, query: dict[str, str]
+    ) -> _Answer:
         if path == "/health":
             return _json(200, {"status": "ok"})
+        if path.startswith("/slots/") and method == "POST":
+            return self._slot_action(path, query.get("action", ""), body)
         if path in ("/v1/models", "/models") and method == "GET":
             return _json(200, {"object": "list", "data": [{"id": self.model, "object": "model"}]})
         if path == "/tokenize" and method == "POST":
@@ -382,6 +390,24 @@ class FakeProvider:
             self.chat_calls += 1
             return _error(policy.status, f"no route for POST {target}")
         return None
+
+    def _slot_action(self, path: str, action: str, body: Any) -> _Answer:
+        name = body.get("filename") if isinstance(body, dict) else None
+        try:
+            slot = int(path.rsplit("/", 1)[1])
+        except ValueError:
+            return _error(400, "bad slot id")
+        if not isinstance(name, str) or not name:
+            return _error(400, "filename required")
+        if action == "save":
+            self.slot_files[name] = self._slot_prompts.get(slot % self.n_slots, "")
+            return _json(200, {"id_slot": slot, "filename": name})
+        if action == "restore":
+            if name not in self.slot_files:
+                return _error(400, f"failed to restore slot: {name} not found")
+            self._slot_prompts[slot % self.n_slots] = self.slot_files[name]
+            return _json(200, {"id_slot": slot, "filename": name})
+        return _error(400, f"unknown slot action {action!r}")
 
     def _chat(self, policy: Policy, body: Any) -> _Answer:
         self.chat_calls += 1

@@ -10,6 +10,7 @@ from aeroweaver_edge.config import LLMConfig
 
 if TYPE_CHECKING:
     from aeroweaver_edge.llm.probe import ProbeResult
+    from commander.plan import MissionPlan
 
 Source = Literal["scripted", "endpoint", "embedded"]
 
@@ -56,3 +57,33 @@ async def probe(llm: LLMConfig) -> ProbeResult:
 
 
 __all__ = ["HONESTY_NOTE", "Source", "probe", "shared_llm"]
+
+
+async def seed_role_slots(
+    llm: LLMConfig, plan: MissionPlan, uavs: list[str], n_slots: int, *, history: bool
+) -> int:
+    """Compute each role's prompt prefix once and copy it into its UAVs' cache slots (UAV i
+    uses slot ``i % n_slots``), so round 0 does not process the same system prompt once per
+    UAV. Best effort (``llm/slot_seed.py``); returns how many slots were seeded."""
+    from aeroweaver_edge.agent.prompt import prefix_messages
+    from aeroweaver_edge.llm.slot_seed import SlotGroup, seed_slots
+    from aeroweaver_edge.observation import MissionView
+    from aeroweaver_edge.skills import load_skills
+
+    if llm.base_url is None:
+        return 0
+    registry = load_skills()
+    groups: dict[tuple[str, str, tuple[str, ...]], tuple[list[dict[str, str]], list[int]]] = {}
+    for i, uav in enumerate(uavs):
+        a = plan.assignments.get(uav)
+        if a is None:
+            continue
+        key = (a.role, a.local_goal, tuple(a.skills))
+        if key not in groups:
+            view = MissionView(plan.mission_id, plan.task, plan.text, a.role, a.local_goal,
+                               tuple(a.skills), tuple(plan.constraints))  # fmt: skip
+            docs = [registry.get(s).prompt_text() for s in a.skills if s in registry]
+            groups[key] = (prefix_messages(view, uav, docs, history=history), [])
+        groups[key][1].append(i % n_slots)
+    root = llm.base_url.removesuffix("/v1")
+    return await seed_slots(root, llm.model, [SlotGroup(m, sl) for m, sl in groups.values()])

@@ -43,7 +43,7 @@ from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.barrier import DEFAULT_TIMEOUT_S as BARRIER_TIMEOUT_S
 from aeroweaver_edge.orchestration.barrier import ExperienceBarrier
 from aeroweaver_edge.orchestration.daemons import DaemonSet
-from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, shared_llm
+from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, seed_role_slots, shared_llm
 from aeroweaver_edge.orchestration.network import RunNetwork, run_network
 from aeroweaver_edge.orchestration.network import free_port as free_port
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
@@ -527,6 +527,8 @@ async def run_swarm(
         missing = await commander.wait_ready(plan.participants, wait_s)
         if missing:
             raise RunFailed(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
+        if pin_slots and opts.baseline == "none":  # best effort: needs llama-server slot files
+            await seed_role_slots(llm, plan, uavs, n_slots, history=opts.history_rounds > 0)
 
         try:
             for ep in range(opts.episodes):

@@ -15,13 +15,15 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.agent.llm_selector import LLMSelector
+from aeroweaver_edge.agent.prompt import prefix_messages
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm import embedded
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable, shared_server
 from aeroweaver_edge.llm.probe import PROBE_LABELS, probe_endpoint
-from aeroweaver_edge.observation import Observation, VehicleState
+from aeroweaver_edge.llm.slot_seed import SlotGroup, seed_slots
+from aeroweaver_edge.observation import MissionView, Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
 
 
@@ -123,3 +125,26 @@ async def test_embedded_slot_keeps_an_agents_prefix_for_its_next_decision() -> N
     # The second decision reuses the system prompt and the agent part from slot 1.
     assert 0 < second.cached_tokens < second.prompt_tokens
     assert second.cached_tokens > second.prompt_tokens // 2
+
+
+@pytest.mark.embedded
+async def test_embedded_slot_seeding_warms_every_slot_of_a_group() -> None:
+    req = replace(_small_request(), skill_docs=("### hold_position\nStay where you are.",) * 6)
+    view = MissionView("m", "coverage", req.mission_text, req.role, req.local_goal, (), ())
+    prefix = prefix_messages(view, "uav0", req.skill_docs, history=True)
+    async with EmbeddedServer(n_parallel=3) as server:
+        assert server.slot_save_dir is not None
+        assert server.slot_save_dir.is_dir()
+        root = server.base_url[: -len("/v1")]
+        seeded = await seed_slots(root, server.model, [SlotGroup(prefix, [0, 1, 2])])
+        cfg = LLMConfig(base_url=server.base_url, model=server.model, deadline_s=30.0, slot=2)
+        selector = LLMSelector(ChatClient.from_config(cfg), cfg)
+        try:  # slot 2's very first decision, as UAV uav2: the shared prefix is already there
+            first = await selector.score(replace(req, history=()))
+        finally:
+            await selector.aclose()
+        save_dir = server.slot_save_dir
+    assert seeded == 3
+    assert first.error is None
+    assert first.cached_tokens > first.prompt_tokens // 2
+    assert not save_dir.exists()  # removed with the server

@@ -32,6 +32,12 @@ async def test_slots_history_and_cached_tokens_in_an_llm_swarm() -> None:
         )
         data = (await run_swarm(opts)).as_dict()
         made = decisions(fake)
+        seeds = [
+            r.body["id_slot"]
+            for r in fake.requests
+            if r.path.endswith("/chat/completions") and "## Round" not in str(r.body["messages"])
+            and "id_slot" in r.body
+        ]  # fmt: skip
 
     assert len(made) == 3 * ROUNDS == data["llm_calls"]
     rounds_seen: dict[str, list[int]] = {}
@@ -53,7 +59,14 @@ async def test_slots_history_and_cached_tokens_in_an_llm_swarm() -> None:
     assert 0 < cached < tokens["prompt"]
     assert per["prompt_cached"] == round(cached / len(made), 1)
     assert per["prompt_uncached"] == round((tokens["prompt"] - cached) / len(made), 1)
+    # Round 0: the role's prefix was computed once before the episode and copied into every
+    # slot, so even the first decisions reuse the system prompt and most of the agent part.
+    system = len(made[0].body["messages"][0]["content"]) // 4
+    first = [r.cached_tokens or 0 for r in made if "## Round 0" in str(r.body["messages"])]
+    assert len(first) == 3
+    assert min(first) > system
+    assert seeds == [0]  # one prefill for the one coverage role, in uav0's slot
+    assert set(fake.slot_files) == {"seed-0.bin"}
     # From round 1 on each UAV's own prefix (system + agent part) comes from its slot.
     later = [r.cached_tokens or 0 for r in made if "## Round 0" not in str(r.body["messages"])]
-    system = len(made[0].body["messages"][0]["content"]) // 4
     assert min(later) > system
