@@ -43,6 +43,9 @@ class ApprovalLink:
         self.mesh.declare_queryable(self.keys.approval_status(self.uav), self.status)
         self.gate.on_change = self._schedule
         self._tasks.append(asyncio.create_task(self._pump(sub), name=f"{self.uav}-approvals"))
+        # Observers that subscribed before our queryable existed (a console or MCP server
+        # started first) would otherwise learn our level only at the first change.
+        self._schedule()
 
     async def aclose(self) -> None:
         self.gate.on_change = None

@@ -453,7 +453,8 @@ class FakeProvider:
         if isinstance(fmt, dict) and fmt.get("type") == "json_schema":
             if policy.json_answers == "refuse_schema":
                 return _error(400, "response_format json_schema is not supported by this model")
-            return self._json_chat(policy, body, prompt, fmt)
+            if policy.content is None:  # scripted content wins: tests of what a model may say
+                return self._json_chat(policy, body, prompt, fmt)
         requested = int(body.get("top_logprobs") or 0)
         max_tokens = int(body.get("max_tokens") or 16)
         dist = _distribution(policy, prompt)

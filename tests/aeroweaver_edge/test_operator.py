@@ -47,8 +47,9 @@ async def test_strict_swarm_launches_only_what_an_operator_approved() -> None:
             moved.set()
 
     opts = SwarmOptions(
-        task="coverage", selector="scripted", max_rounds=400, pace_s=0.05, approval="strict"
-    )
+        task="coverage", selector="scripted", max_rounds=400, pace_s=0.05, approval="strict",
+        secure=False,  # the application's checks alone (secured: security/test_operator_secured)
+    )  # fmt: skip
     run: asyncio.Task[RunSummary] = asyncio.create_task(
         run_swarm(opts, on_round=on_round, on_started=on_started)
     )
@@ -114,8 +115,9 @@ async def test_approve_cli_reaches_a_uav_and_reports_refusals() -> None:
 
     # strict: nobody launches unasked, so the mission cannot complete before the test ends
     opts = SwarmOptions(
-        task="coverage", selector="scripted", max_rounds=400, pace_s=0.05, approval="strict"
-    )
+        task="coverage", selector="scripted", max_rounds=400, pace_s=0.05, approval="strict",
+        secure=False,  # the application's checks alone (secured: security/test_operator_secured)
+    )  # fmt: skip
     run = asyncio.create_task(run_swarm(opts, on_started=on_started))
     try:
         await asyncio.wait_for(started.wait(), 60)

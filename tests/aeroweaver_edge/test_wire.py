@@ -15,6 +15,9 @@ from hypothesis import strategies as st
 from aeroweaver_edge.wire import (
     MAX_PAYLOAD_BYTES,
     SCHEMA_VERSION,
+    Approval,
+    ApprovalRecord,
+    ApprovalStatus,
     Assignment,
     CentralAnswer,
     CentralAsk,
@@ -29,7 +32,9 @@ from aeroweaver_edge.wire import (
     Keys,
     MissionContext,
     MsgRef,
+    OperatorCommand,
     Payload,
+    PendingAction,
     ProgressReport,
     ReplayFilter,
     SimCommand,
@@ -37,6 +42,7 @@ from aeroweaver_edge.wire import (
     SimPerception,
     SimReward,
     StateBeacon,
+    WorldSnapshot,
     last_chunk,
 )
 
@@ -171,6 +177,41 @@ SAMPLES: list[msgspec.Struct] = [
     ),
     CentralReview(h=H, uav="uav1", episode=0, round=2, agree=False, suggest="B"),
     CentralAnswer(h=H, uav="uav1", episode=0, round=2, phase="final", label="A", reason="plan"),
+    WorldSnapshot(
+        h=H,
+        task="coverage",
+        episode=0,
+        round=3,
+        uavs=["uav1", "uav2"],
+        bodies=[Entity(id="uav1", kind="uav", pos=(1.5, -2.0, -5.0), role="searcher")],
+        entities=[Entity(id="L0", kind="landmark", pos=(10.0, 20.0, 0.0))],
+        rewards={"uav1": -1.25},
+        held=["uav2"],
+        messages=[MsgRef(sender="uav1", seq=4, to="uav2")],
+        reason="",
+    ),
+    OperatorCommand(h=H, action="stop", mission_id="m1", reason="wind", by="ops"),
+    Approval(h=H, id="appr-0001", uav="uav1", action="takeoff", ttl_s=60.0, by="ops"),
+    ApprovalStatus(
+        h=H,
+        uav="uav1",
+        level="normal",
+        pending=[PendingAction(action="land", since=12.0, skill="land")],
+        records=[
+            ApprovalRecord(
+                id="appr-0001",
+                action="takeoff",
+                sender="operator",
+                by="ops",
+                issued=1.0,
+                received=1.1,
+                expires=61.1,
+                state="used",
+                uses=1,
+            )
+        ],
+        ack="appr-0001",
+    ),
 ]
 
 

@@ -15,6 +15,8 @@ from commander.harness import plan_mission
 
 
 @pytest.mark.embedded
+@pytest.mark.slow
+@pytest.mark.timeout(900)  # two generations of a JSON record; minutes on a loaded 2-core box
 async def test_plan_mission_on_the_embedded_model() -> None:
     roster = ["uav0", "uav1", "uav2"]
     async with EmbeddedServer() as server:

@@ -411,6 +411,7 @@ def test_signal_goal_offers_only_the_private_goal_and_stays_put(reg: SkillRegist
             to="*",
             kind="goal",
             body={"skill": "signal_goal", "target_id": "L1", "north": 4.0, "east": 34.0},
+            purpose="task",  # the listener cannot do its task without it
         ),
     )
     assert run(skill, o, ctx("speaker"), target_id="L0") == HOLD  # never signal a false goal
@@ -463,7 +464,10 @@ def test_encode_decode_round_trip(reg: SkillRegistry, plain: int, key: int) -> N
     assert sent.motion == Hold()
     assert sent.messages == (
         Outgoing(
-            to="*", kind="ciphertext", body={"skill": "encode_message", "ciphertext": plain ^ key}
+            to="*",
+            kind="ciphertext",
+            body={"skill": "encode_message", "ciphertext": plain ^ key},
+            purpose="task",  # the receiver's whole task
         ),
     )
     receiver = obs(messages=_deliver(sent), facts={"key": str(key)})

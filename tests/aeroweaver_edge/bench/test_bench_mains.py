@@ -12,7 +12,6 @@ import pytest
 
 from aeroweaver_edge import cli
 from aeroweaver_edge.bench import (
-    adaptation,
     llm_latency,
     mavlink,
     scale,
@@ -84,27 +83,6 @@ def test_scale_measures_each_daemon_process(capsys: pytest.CaptureFixture[str]) 
     assert row["peak_rss_mb"]["mean"] <= row["peak_rss_mb"]["max"]
 
 
-def test_adaptation_writes_json_csv_table_and_plot(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    out = tmp_path / "adapt"
-    argv = ["--episodes", "2", "--uavs", "2", "--betas", "0.8", "0", "--selector", "scripted"]
-    assert adaptation.main([*argv, "--out", str(out)]) == 0
-    data = json.loads((out / "results.json").read_text(encoding="utf-8"))
-    assert set(data["conditions"]) == {"beta=0.8", "beta=0"}
-    for c in data["conditions"].values():
-        assert len(c["team_return"]) == len(c["rounds"]) == 2
-        assert c["tokens"]["total"] == 0  # scripted: no LLM
-    csv_rows = (out / "results.csv").read_text(encoding="utf-8").splitlines()
-    assert csv_rows[0] == "condition,episode,team_return,rounds,reason"
-    assert len(csv_rows) == 1 + 2 * 2
-    table = (out / "table.md").read_text(encoding="utf-8")
-    assert table in capsys.readouterr().out
-    assert "| mean ± SD |" in table
-    assert f"Command: `python -m aeroweaver_edge.bench.adaptation {' '.join(argv)}" in table
-    assert (out / "team_return.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-
-
 def test_security_prints_every_figure(capsys: pytest.CaptureFixture[str]) -> None:
     assert security.main(["--rtt", "3", "--opens", "1", "--crypto", "3"]) == 0
     data = json.loads(capsys.readouterr().out)
@@ -139,17 +117,15 @@ def test_llm_latency_without_the_model_is_one_line(
         raise EmbeddedUnavailable("no model here")
 
     monkeypatch.setattr(llm_latency.EmbeddedServer, "__aenter__", absent)
-    assert llm_latency.main(["--runs", "1"]) == 2
+    assert llm_latency.main(["--rounds", "1"]) == 2
     assert capsys.readouterr().err == "embedded model unavailable: no model here\n"
 
 
-def test_llm_latency_request_and_percentiles() -> None:
-    """The timed part needs the model for ~10 s per request on a loaded CI machine, so it
-    is run by hand (docs/performance.md); its inputs and arithmetic are checked here."""
-    a, b = llm_latency.decision_request(3), llm_latency.decision_request(4)
-    assert [c.label for c in a.candidates] == list("ABCDEFGH")
-    assert (a.skill_docs, a.mission_text) == (b.skill_docs, b.mission_text)  # shared prefix
-    assert a.observation_text != b.observation_text  # the per-round tail differs
+def test_llm_latency_arguments_and_percentiles(capsys: pytest.CaptureFixture[str]) -> None:
+    """The timed part needs the model (docs/performance.md has its figures); its argument
+    checks and arithmetic are checked here."""
+    assert llm_latency.main(["--uavs", "0"]) == 2
+    assert "--uavs and --rounds must be >= 1" in capsys.readouterr().err
     xs = [5.0, 1.0, 4.0, 2.0, 3.0]
     assert [llm_latency.percentile(xs, q) for q in (0, 20, 50, 95, 100)] == [
         1.0,

@@ -71,8 +71,10 @@ async def until(fn: Any, timeout_s: float = 20.0) -> Any:
 
 async def test_mcp_over_http_plans_starts_approves_and_stops(swarm: MeshConfig) -> None:
     port = free_port()
+    # Paced so the mission is still flying when the test reaches its approval and stop
+    # steps on a loaded machine (scripted coverage may complete in ~30 rounds).
     opts = McpOptions(swarm=SWARM, mesh=swarm, operator_token=TOKEN, sim_world=True,
-                      pace_s=0.1, max_rounds=400)  # fmt: skip
+                      pace_s=0.5, max_rounds=400)  # fmt: skip
     server = asyncio.create_task(serve(opts, "http", "127.0.0.1", port))
     try:
         await asyncio.sleep(0)  # the server binds before the client dials

@@ -301,10 +301,11 @@ def test_fake_liveliness_tokens_join_no_roster(coverage: Campaign) -> None:
     """Before: an unknown id joined every roster, 87 -> 2 rounds/s, named in lost_uavs."""
     assert coverage.control_seen
     seen = Counter(k for k, mark in coverage.tokens_seen if mark == b"+")
-    assert seen[K.alive_uav("uav99")] == seen[f"{K.root}/alive/world"] == 0
-    # uav1's and the Commander's genuine tokens, each once (the forged copies were refused;
-    # transport_acl.py shows the same on a quiet mesh, where a copy would be the only one).
-    assert seen[K.alive_uav("uav1")] == seen[K.alive_cmdr] == 1
+    assert seen[K.alive_uav("uav99")] == 0
+    # uav1's, the Commander's and the world's genuine tokens, each once (the forged copies
+    # were refused; transport_acl.py shows the same on a quiet mesh, where a copy would be
+    # the only one).
+    assert seen[K.alive_uav("uav1")] == seen[K.alive_cmdr] == seen[f"{K.root}/alive/world"] == 1
     assert "unknown_token" not in coverage.rejected  # never reached the world at all
     same_outcome(coverage)
 
