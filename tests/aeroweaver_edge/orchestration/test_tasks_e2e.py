@@ -21,7 +21,7 @@ from aeroweaver_edge.tasks import TASK_NAMES, get_spec
 PINNED: dict[str, tuple[float, int, str]] = {
     "coverage": (-26.693824461883835, 24, "horizon"),
     "pursuit_evasion": (70.0, 24, "complete"),
-    "guided_navigation": (-3.3267287956580245, 14, "complete"),
+    "guided_navigation": (-3.32672923737776, 14, "complete"),
     "private_communication": (4.0, 3, "complete"),
     "circular_formation": (-8.883145188301205, 21, "complete"),
     "line_formation": (-7.449791114886901, 15, "complete"),
