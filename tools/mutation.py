@@ -436,12 +436,16 @@ def mandatory(root: Path, target: Target) -> list[Mutant]:
     return out
 
 
-def select(root: Path, target: Target, seed: int, only_mandatory: bool = False) -> list[Mutant]:
+def select(
+    root: Path, target: Target, seed: int, only_mandatory: bool = False, sample: int | None = None
+) -> list[Mutant]:
+    """The mandatory mutants plus ``sample`` drawn ones (default: the target's own size)."""
     if only_mandatory:
         return mandatory(root, target)
     pool = candidates(root, target)
     rng = random.Random(f"{seed}:{target.name}")
-    picked = rng.sample(pool, min(target.sample, len(pool)))
+    size = target.sample if sample is None else sample
+    picked = rng.sample(pool, min(size, len(pool)))
     return mandatory(root, target) + sorted(picked, key=lambda m: (m.file, m.start, m.kind))
 
 
@@ -514,6 +518,7 @@ def run(
     timeout_s: float,
     only_mandatory: bool = False,
     every: bool = False,
+    sample: int | None = None,
 ) -> list[Outcome]:
     outcomes: list[Outcome] = []
     with tempfile.TemporaryDirectory(prefix="aw-mutation-") as tmp:
@@ -532,7 +537,7 @@ def run(
             if status != "survived":
                 raise SystemExit(f"mutation: {target.name}: tests fail unmutated: {failed}")
             print(f"== {target.name}: {len(tests)} test paths, {took:.0f} s unmutated", flush=True)
-            for m in select(root, target, seed, only_mandatory):
+            for m in select(root, target, seed, only_mandatory, sample):
                 original = (tree / m.file).read_bytes()
                 try:
                     if not _apply(tree, m, original):
@@ -595,6 +600,12 @@ def main(argv: list[str] | None = None) -> int:
     names = ", ".join(t.name for t in TARGETS)
     p.add_argument("--targets", nargs="+", help=f"default: all ({names})")
     p.add_argument("--seed", type=int, default=12)
+    p.add_argument(
+        "--sample",
+        type=int,
+        metavar="N",
+        help="mutants drawn per target instead of each target's own size (a shorter run)",
+    )
     p.add_argument("--timeout", type=float, default=120.0, help="seconds per test run")
     p.add_argument("--list", action="store_true", help="print the mutants, run nothing")
     p.add_argument(
@@ -603,20 +614,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--every", action="store_true", help="run every test, list every failure")
     p.add_argument("--json", type=Path, help="write every outcome as JSON")
     args = p.parse_args(argv)
+    if args.sample is not None and args.sample < 0:
+        p.error("--sample must be at least 0")
     root = args.root.resolve()
     targets = list(_iter_targets(args.targets))
     if args.list:
         for t in targets:
             pool = candidates(root, t)
-            print(f"== {t.name}: {len(pool)} candidates, {t.sample} drawn (seed {args.seed})")
-            for m in select(root, t, args.seed, args.mandatory):
+            size = t.sample if args.sample is None else args.sample
+            print(f"== {t.name}: {len(pool)} candidates, {size} drawn (seed {args.seed})")
+            for m in select(root, t, args.seed, args.mandatory, args.sample):
                 print(f"  {m.id}  [{m.mandatory or m.kind}]")
         return 0
-    outcomes = run(root, targets, args.seed, args.timeout, args.mandatory, args.every)
+    outcomes = run(root, targets, args.seed, args.timeout, args.mandatory, args.every, args.sample)
     table = report(outcomes, [t for t in targets if any(o.target == t.name for o in outcomes)])
     if args.json:
         args.json.write_text(
-            json.dumps({"root": str(root), "seed": args.seed, "table": table,
+            json.dumps({"root": str(root), "seed": args.seed, "sample": args.sample, "table": table,
                         "outcomes": [asdict(o) for o in outcomes]}, indent=2) + "\n",
             encoding="utf-8",
         )  # fmt: skip
