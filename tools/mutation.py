@@ -238,16 +238,16 @@ MANDATORY: tuple[tuple[str, str, str, bytes | tuple[bytes, ...], bytes], ...] = 
 # over all mutants and over the others.
 EQUIVALENT: dict[str, str] = {
     "aeroweaver_edge/scores.py:51:43:>->>=": "leftover mass exactly 1e-12 never occurs",
-    "aeroweaver_edge/agent/memory.py:375:11:if-dropped": (
+    "aeroweaver_edge/agent/memory.py:376:11:if-dropped": (
         "sqlite creates the missing file empty, which passes every check: None either way"
     ),
-    "aeroweaver_edge/agent/memory.py:398:15:and-operand-dropped#1": (
+    "aeroweaver_edge/agent/memory.py:399:15:and-operand-dropped#1": (
         "only OperationalError says locked/busy/unable to open"
     ),
-    "aeroweaver_edge/agent/memory.py:729:33:and->or": (
+    "aeroweaver_edge/agent/memory.py:730:33:and->or": (
         "a loaded group indexes every row of this run (appends add to it): i is never None"
     ),
-    "aeroweaver_edge/peers.py:223:27:const 1.0->2.0": (
+    "aeroweaver_edge/peers.py:233:27:const 1.0->2.0": (
         "collect_inbox's default timeout: every caller passes its own"
     ),
 }
