@@ -91,16 +91,18 @@ def test_adaptation_writes_json_csv_table_and_plot(
     argv = ["--episodes", "2", "--uavs", "2", "--betas", "0.8", "0", "--selector", "scripted"]
     assert adaptation.main([*argv, "--out", str(out)]) == 0
     data = json.loads((out / "results.json").read_text(encoding="utf-8"))
-    assert set(data["conditions"]) == {"beta=0.8", "beta=0"}
-    for c in data["conditions"].values():
-        assert len(c["team_return"]) == len(c["rounds"]) == 2
-        assert c["tokens"]["total"] == 0  # scripted: no LLM
+    assert [(r["task"], r["seed"], r["variant"]) for r in data["runs"]] == [
+        ("coverage", 1, "beta=0.8"),
+        ("coverage", 1, "beta=0"),
+    ]
+    for r in data["runs"]:
+        assert [e["episode"] for e in r["episodes"]] == [0, 1]
+        assert [e["tokens"] for e in r["episodes"]] == [0, 0]  # scripted: no LLM
     csv_rows = (out / "results.csv").read_text(encoding="utf-8").splitlines()
-    assert csv_rows[0] == "condition,episode,team_return,rounds,reason"
+    assert csv_rows[0].startswith("task,seed,variant,episode,team_return,rounds,reason,")
     assert len(csv_rows) == 1 + 2 * 2
     table = (out / "table.md").read_text(encoding="utf-8")
     assert table in capsys.readouterr().out
-    assert "| mean ± SD |" in table
     assert f"Command: `python -m aeroweaver_edge.bench.adaptation {' '.join(argv)}" in table
     assert (out / "team_return.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -139,17 +141,20 @@ def test_llm_latency_without_the_model_is_one_line(
         raise EmbeddedUnavailable("no model here")
 
     monkeypatch.setattr(llm_latency.EmbeddedServer, "__aenter__", absent)
-    assert llm_latency.main(["--runs", "1"]) == 2
+    assert llm_latency.main(["--rounds", "1"]) == 2
     assert capsys.readouterr().err == "embedded model unavailable: no model here\n"
 
 
-def test_llm_latency_request_and_percentiles() -> None:
+def test_llm_latency_rejects_a_bad_shape_and_ranks_percentiles(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     """The timed part needs the model for ~10 s per request on a loaded CI machine, so it
-    is run by hand (docs/performance.md); its inputs and arithmetic are checked here."""
-    a, b = llm_latency.decision_request(3), llm_latency.decision_request(4)
-    assert [c.label for c in a.candidates] == list("ABCDEFGH")
-    assert (a.skill_docs, a.mission_text) == (b.skill_docs, b.mission_text)  # shared prefix
-    assert a.observation_text != b.observation_text  # the per-round tail differs
+    is run by hand (docs/performance.md); its arguments and arithmetic are checked here."""
+    for argv in (["--uavs", "0"], ["--rounds", "0"], ["--history", "65"]):
+        assert llm_latency.main(argv) == 2
+        assert capsys.readouterr().err == (
+            "llm_latency: --uavs and --rounds must be >= 1, --history 0..64\n"
+        )
     xs = [5.0, 1.0, 4.0, 2.0, 3.0]
     assert [llm_latency.percentile(xs, q) for q in (0, 20, 50, 95, 100)] == [
         1.0,
