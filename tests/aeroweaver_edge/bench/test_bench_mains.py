@@ -19,7 +19,7 @@ from aeroweaver_edge.bench import (
     security,
     world_speed,
 )
-from aeroweaver_edge.llm.embedded import EmbeddedUnavailable
+from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable
 
 
 def json_lines(text: str) -> list[dict[str, Any]]:
@@ -140,7 +140,7 @@ def test_llm_latency_without_the_model_is_one_line(
     def absent(*_args: object, **_kw: object) -> None:
         raise EmbeddedUnavailable("no model here")
 
-    monkeypatch.setattr(llm_latency.EmbeddedServer, "__aenter__", absent)
+    monkeypatch.setattr(EmbeddedServer, "__aenter__", absent)
     assert llm_latency.main(["--rounds", "1"]) == 2
     assert capsys.readouterr().err == "embedded model unavailable: no model here\n"
 
