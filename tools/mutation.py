@@ -250,6 +250,10 @@ EQUIVALENT: dict[str, str] = {
     "aeroweaver_edge/peers.py:233:27:const 1.0->2.0": (
         "collect_inbox's default timeout: every caller passes its own"
     ),
+    "aeroweaver_edge/peers.py:336:12:call-removed": (
+        "_beacon_seen is read only beside a _beacons entry and both are written together:"
+        " a departed peer's stale arrival time is never read, the next beacon overwrites it"
+    ),
 }
 BYPASS_IMPORT = (
     b"from aeroweaver_edge.actions import HOLD, Intent, VehicleAction\n",
