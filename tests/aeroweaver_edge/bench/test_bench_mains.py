@@ -13,6 +13,7 @@ import pytest
 from aeroweaver_edge import cli
 from aeroweaver_edge.bench import (
     adaptation,
+    kill_restart,
     llm_latency,
     mavlink,
     scale,
@@ -82,6 +83,21 @@ def test_scale_measures_each_daemon_process(capsys: pytest.CaptureFixture[str]) 
     assert row["mode"] == "processes"
     assert positive(row["peak_rss_mb"]["max"])
     assert row["peak_rss_mb"]["mean"] <= row["peak_rss_mb"]["max"]
+
+
+@pytest.mark.slow
+def test_kill_restart_kills_one_daemon_and_it_rejoins_with_nothing_lost(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    argv = ["--cycles", "1", "--uavs", "2", "--episodes", "2", "--kill-p", "1.0", "--seed", "0"]
+    assert kill_restart.main(argv) == 0
+    [row] = json_lines(capsys.readouterr().out)
+    assert (row["cycles"], row["runs"], row["completed_runs"], row["failed_runs"]) == (1, 1, 1, [])
+    assert (row["records_lost"], row["lost"], row["check_problems"]) == (0, [], 0)
+    assert row["records_checked"] > 0
+    assert (row["world_rejoins"], row["rejoins_measured"]) == (1, 1)
+    assert positive(row["restart_to_rejoin_s"]["p50"])
+    assert row["restart_to_first_round_s"]["p50"] >= row["restart_to_rejoin_s"]["p50"]
 
 
 def test_adaptation_writes_json_csv_table_and_plot(
