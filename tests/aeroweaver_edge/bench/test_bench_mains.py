@@ -13,6 +13,7 @@ import pytest
 from aeroweaver_edge import cli
 from aeroweaver_edge.bench import (
     adaptation,
+    adaptation_why,
     kill_restart,
     llm_latency,
     mavlink,
@@ -121,6 +122,17 @@ def test_adaptation_writes_json_csv_table_and_plot(
     assert table in capsys.readouterr().out
     assert f"Command: `python -m aeroweaver_edge.bench.adaptation {' '.join(argv)}" in table
     assert (out / "team_return.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the figures read back from the traces it kept
+    assert adaptation_why.main([str(out)]) == 0
+    why = (out / "why.md").read_text(encoding="utf-8")
+    assert why in capsys.readouterr().out
+    rows = {r["variant"]: r for r in json.loads((out / "why.json").read_text(encoding="utf-8"))}
+    assert set(rows) == {"beta=0.8", "beta=0"}
+    assert rows["beta=0"]["corrected"] == 0  # no correction without beta
+    assert rows["beta=0"]["correction_push_median"] == 0
+    assert all(r["decisions"] > 0 and r["task"] == "coverage" for r in rows.values())
+    assert adaptation_why.main([str(tmp_path)]) == 2  # no runs there
+    assert capsys.readouterr().err == f"no adaptation runs under {tmp_path}/runs\n"
 
 
 def test_security_prints_every_figure(capsys: pytest.CaptureFixture[str]) -> None:
