@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -151,6 +152,18 @@ async def test_a_round_selects_gates_acts_and_talks(registry: SkillRegistry) -> 
         assert seen == {(ref.sender, ref.seq) for ref in expect.get(u, [])}
         assert r.hub.channels[u].stats.missing == 0
         assert r.scorers[u].requests[-1].task == "coverage"
+
+
+async def test_a_rounds_latency_is_the_time_it_took(registry: SkillRegistry) -> None:
+    """Bounded by the caller's own clock (no speed asserted): a chosen skill and a hold."""
+    r = rig(registry, "coverage", 1, COVER)
+    for view in (r.views["uav0"], None):
+        r.views["uav0"] = view
+        started = time.monotonic()
+        out = (await r.play(0))["uav0"]
+        took = time.monotonic() - started
+        assert out.chosen_by_agent == (view is not None)
+        assert 0.0 < out.latency_s <= took
 
 
 async def test_messages_from_out_of_range_are_dropped_at_the_receiver(
