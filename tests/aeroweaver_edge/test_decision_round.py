@@ -196,6 +196,21 @@ async def test_more_options_than_labels_holds(registry: SkillRegistry) -> None:
     assert out.reason.endswith("options beyond the label budget")
 
 
+async def test_no_callable_skill_holds_without_asking_the_selector(
+    registry: SkillRegistry,
+) -> None:
+    """An active subset of skills this UAV does not have: a hold with its own cause."""
+    r = rig(registry, "coverage", 1, ("no_such_skill",))
+    out = (await r.play(0))["uav0"]
+    assert (out.held, out.reason, out.hold_cause) == (
+        True,
+        "no callable skill in the active subset",
+        "no_candidates",
+    )
+    assert (out.chosen_by_agent, out.n_candidates) == (False, 0)
+    assert r.scorers["uav0"].requests == []
+
+
 async def test_a_selector_error_holds_this_uav_only(registry: SkillRegistry) -> None:
     r = rig(registry, "coverage", 2, COVER)
     r.contexts["uav0"].selector = Erroring()
