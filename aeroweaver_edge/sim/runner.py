@@ -299,15 +299,13 @@ class WorldRunner:
             self.stats.commands += len(commands)
             expect = defaultdict(list)
             orders: dict[str, Vec3 | None] = {u: None for u in controlled}
-            # The envelope invariant judges what the UAVs asked for, before the world's own
-            # bound (command_check) could hide a bypassed gate.
-            asked: dict[str, Vec3 | None] = dict(orders)
+            commanded = dict(orders)  # as the daemons sent them, before the world bounds them
             guesses: dict[str, str] = {}
             for uav, cmd in commands.items():
                 if uav not in orders:
                     continue
-                asked[uav] = None if cmd.held else cmd.vel
                 orders[uav] = None if cmd.held else self.check.bound(world, uav, cmd.vel)
+                commanded[uav] = None if cmd.held else cmd.vel
                 if cmd.guess is not None:
                     guesses[uav] = cmd.guess
                 for ref in cmd.sent:
@@ -316,9 +314,12 @@ class WorldRunner:
             if self.vehicles is not None:
                 # flight link: the bodies move as the autopilots were told over MAVLink; wait
                 # until each declared setpoint has arrived, then hold only the silent UAVs.
-                orders = asked = await self.vehicles.settle(commands, controlled)
+                orders = await self.vehicles.settle(commands, controlled)
+                commanded = orders
+            # The invariant judges what each daemon commanded: the world's own bound (a sim
+            # check no real vehicle has) must not hide a command that skipped the gate.
             violations = self.envelope.check_round(
-                episode, rnd, {b.id: b.pos for b in world.bodies()}, asked, told
+                episode, rnd, {b.id: b.pos for b in world.bodies()}, commanded, told
             )
             ep.apply_actions(scripted)
             ep.apply(orders, guesses)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -153,6 +154,18 @@ async def test_a_round_selects_gates_acts_and_talks(registry: SkillRegistry) -> 
         assert r.scorers[u].requests[-1].task == "coverage"
 
 
+async def test_a_rounds_latency_is_the_time_it_took(registry: SkillRegistry) -> None:
+    """Bounded by the caller's own clock (no speed asserted): a chosen skill and a hold."""
+    r = rig(registry, "coverage", 1, COVER)
+    for view in (r.views["uav0"], None):
+        r.views["uav0"] = view
+        started = time.monotonic()
+        out = (await r.play(0))["uav0"]
+        took = time.monotonic() - started
+        assert out.chosen_by_agent == (view is not None)
+        assert 0.0 < out.latency_s <= took
+
+
 async def test_messages_from_out_of_range_are_dropped_at_the_receiver(
     registry: SkillRegistry,
 ) -> None:
@@ -181,6 +194,21 @@ async def test_more_options_than_labels_holds(registry: SkillRegistry) -> None:
     out = (await r.play(0))["uav0"]
     assert out.held
     assert out.reason.endswith("options beyond the label budget")
+
+
+async def test_no_callable_skill_holds_without_asking_the_selector(
+    registry: SkillRegistry,
+) -> None:
+    """An active subset of skills this UAV does not have: a hold with its own cause."""
+    r = rig(registry, "coverage", 1, ("no_such_skill",))
+    out = (await r.play(0))["uav0"]
+    assert (out.held, out.reason, out.hold_cause) == (
+        True,
+        "no callable skill in the active subset",
+        "no_candidates",
+    )
+    assert (out.chosen_by_agent, out.n_candidates) == (False, 0)
+    assert r.scorers["uav0"].requests == []
 
 
 async def test_a_selector_error_holds_this_uav_only(registry: SkillRegistry) -> None:

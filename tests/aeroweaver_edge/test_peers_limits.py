@@ -196,6 +196,25 @@ async def test_a_round_stands_for_half_a_second_by_default(zenoh_net: ZenohNet) 
     assert b.stats.rejected == {"implausible_motion": 1}
 
 
+async def test_a_link_without_its_own_position_sends_nothing(zenoh_net: ZenohNet) -> None:
+    """Before its first beacon a UAV cannot say where it sent from: nothing goes out, and
+    the drop is counted under its own reason (receivers judge range by sender_pos)."""
+    meshes = [await zenoh_net.open(u) for u in ("a", "b")]
+    a, b = (
+        PeerLink(m, KEYS, u, HeaderFactory(u, epoch=1), 55.0)
+        for m, u in zip(meshes, "ab", strict=True)
+    )
+    for link in (a, b):
+        await link.start()
+    assert await a.wait_for_peers({"b"}, 3.0)
+    assert await a.send("b", "status", {"n": 1}, round=1) is None
+    assert await a.send("*", "status", {"n": 2}, round=1) is None
+    assert a.stats.dropped == {"no_own_position": 2}
+    assert a.stats.sent == 0
+    for link in (a, b):
+        await link.aclose()
+
+
 async def test_a_closed_link_sends_nothing(zenoh_net: ZenohNet) -> None:
     """After ``aclose`` the session may live on (the daemon owns it); the link must not."""
     a, _b, _ = await pair(zenoh_net)

@@ -226,7 +226,8 @@ def test_separation_ignores_non_finite_neighbours_and_can_be_disabled() -> None:
     out = GATE.gate(SetVelocity((4.0, 0.0, 0.0)), HOME, neighbours=[(NAN, 0.0, -5.0)])
     assert not out.held
     no_sep = SafetyGate(CFG.model_copy(update={"min_separation_m": 0.0}), H)
-    assert not no_sep.gate(SetVelocity((4.0, 0.0, 0.0)), HOME, [(2.0, 0.0, -5.0)]).held
+    out = no_sep.gate(SetVelocity((4.0, 0.0, 0.0)), HOME, [(2.0, 0.0, -5.0)], [(1.0, 0.0, -5.0)])
+    assert (out.held, out.vel, out.violations) == (False, (4.0, 0.0, 0.0), ())  # untouched
 
 
 def test_separation_checks_every_neighbour() -> None:

@@ -572,6 +572,27 @@ def test_a_file_whose_writer_died_at_birth_is_initialised_not_set_aside(db: Path
     assert list(db.parent.glob("*.corrupt-*")) == []
 
 
+@pytest.mark.parametrize("version", [0, -1, "two"])
+def test_an_invalid_schema_version_is_set_aside(
+    db: Path, version: object, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A version no release ever wrote: the file is quarantined untouched, a fresh one used."""
+    conn = sqlite3.connect(db)
+    conn.execute("CREATE TABLE schema_version (version INTEGER NOT NULL)")
+    conn.execute("INSERT INTO schema_version VALUES (?)", (version,))
+    conn.commit()
+    conn.close()
+    with caplog.at_level(logging.ERROR), ExperienceMemory(db) as m:
+        assert m.quarantined is not None
+        assert len(m) == 0
+    assert f"schema version {version!r} is not valid" in caplog.text
+    aside = sqlite3.connect(m.quarantined)
+    try:
+        assert aside.execute("SELECT version FROM schema_version").fetchall() == [(version,)]
+    finally:
+        aside.close()
+
+
 def test_damaged_index_page_fails_integrity_check(db: Path) -> None:
     with ExperienceMemory(db) as m:
         fill_small(m)

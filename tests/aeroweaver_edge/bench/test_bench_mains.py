@@ -12,13 +12,16 @@ import pytest
 
 from aeroweaver_edge import cli
 from aeroweaver_edge.bench import (
+    adaptation,
+    adaptation_why,
+    kill_restart,
     llm_latency,
     mavlink,
     scale,
     security,
     world_speed,
 )
-from aeroweaver_edge.llm.embedded import EmbeddedUnavailable
+from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable
 
 
 def json_lines(text: str) -> list[dict[str, Any]]:
@@ -83,6 +86,55 @@ def test_scale_measures_each_daemon_process(capsys: pytest.CaptureFixture[str]) 
     assert row["peak_rss_mb"]["mean"] <= row["peak_rss_mb"]["max"]
 
 
+@pytest.mark.slow
+def test_kill_restart_kills_one_daemon_and_it_rejoins_with_nothing_lost(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    argv = ["--cycles", "1", "--uavs", "2", "--episodes", "2", "--kill-p", "1.0", "--seed", "0"]
+    assert kill_restart.main(argv) == 0
+    [row] = json_lines(capsys.readouterr().out)
+    assert (row["cycles"], row["runs"], row["completed_runs"], row["failed_runs"]) == (1, 1, 1, [])
+    assert (row["records_lost"], row["lost"], row["check_problems"]) == (0, [], 0)
+    assert row["records_checked"] > 0
+    assert (row["world_rejoins"], row["rejoins_measured"]) == (1, 1)
+    assert positive(row["restart_to_rejoin_s"]["p50"])
+    assert row["restart_to_first_round_s"]["p50"] >= row["restart_to_rejoin_s"]["p50"]
+
+
+def test_adaptation_writes_json_csv_table_and_plot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "adapt"
+    argv = ["--episodes", "2", "--uavs", "2", "--betas", "0.8", "0", "--selector", "scripted"]
+    assert adaptation.main([*argv, "--out", str(out)]) == 0
+    data = json.loads((out / "results.json").read_text(encoding="utf-8"))
+    assert [(r["task"], r["seed"], r["variant"]) for r in data["runs"]] == [
+        ("coverage", 1, "beta=0.8"),
+        ("coverage", 1, "beta=0"),
+    ]
+    for r in data["runs"]:
+        assert [e["episode"] for e in r["episodes"]] == [0, 1]
+        assert [e["tokens"] for e in r["episodes"]] == [0, 0]  # scripted: no LLM
+    csv_rows = (out / "results.csv").read_text(encoding="utf-8").splitlines()
+    assert csv_rows[0].startswith("task,seed,variant,episode,team_return,rounds,reason,")
+    assert len(csv_rows) == 1 + 2 * 2
+    table = (out / "table.md").read_text(encoding="utf-8")
+    assert table in capsys.readouterr().out
+    assert f"Command: `python -m aeroweaver_edge.bench.adaptation {' '.join(argv)}" in table
+    assert (out / "team_return.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the figures read back from the traces it kept
+    assert adaptation_why.main([str(out)]) == 0
+    why = (out / "why.md").read_text(encoding="utf-8")
+    assert why in capsys.readouterr().out
+    rows = {r["variant"]: r for r in json.loads((out / "why.json").read_text(encoding="utf-8"))}
+    assert set(rows) == {"beta=0.8", "beta=0"}
+    assert rows["beta=0"]["corrected"] == 0  # no correction without beta
+    assert rows["beta=0"]["correction_push_median"] == 0
+    assert all(r["decisions"] > 0 and r["task"] == "coverage" for r in rows.values())
+    assert adaptation_why.main([str(tmp_path)]) == 2  # no runs there
+    assert capsys.readouterr().err == f"no adaptation runs under {tmp_path}/runs\n"
+
+
 def test_security_prints_every_figure(capsys: pytest.CaptureFixture[str]) -> None:
     assert security.main(["--rtt", "3", "--opens", "1", "--crypto", "3"]) == 0
     data = json.loads(capsys.readouterr().out)
@@ -116,16 +168,21 @@ def test_llm_latency_without_the_model_is_one_line(
     def absent(*_args: object, **_kw: object) -> None:
         raise EmbeddedUnavailable("no model here")
 
-    monkeypatch.setattr(llm_latency.EmbeddedServer, "__aenter__", absent)
+    monkeypatch.setattr(EmbeddedServer, "__aenter__", absent)
     assert llm_latency.main(["--rounds", "1"]) == 2
     assert capsys.readouterr().err == "embedded model unavailable: no model here\n"
 
 
-def test_llm_latency_arguments_and_percentiles(capsys: pytest.CaptureFixture[str]) -> None:
-    """The timed part needs the model (docs/performance.md has its figures); its argument
-    checks and arithmetic are checked here."""
-    assert llm_latency.main(["--uavs", "0"]) == 2
-    assert "--uavs and --rounds must be >= 1" in capsys.readouterr().err
+def test_llm_latency_rejects_a_bad_shape_and_ranks_percentiles(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The timed part needs the model for ~10 s per request on a loaded CI machine, so it
+    is run by hand (docs/performance.md); its arguments and arithmetic are checked here."""
+    for argv in (["--uavs", "0"], ["--rounds", "0"], ["--history", "65"]):
+        assert llm_latency.main(argv) == 2
+        assert capsys.readouterr().err == (
+            "llm_latency: --uavs and --rounds must be >= 1, --history 0..64\n"
+        )
     xs = [5.0, 1.0, 4.0, 2.0, 3.0]
     assert [llm_latency.percentile(xs, q) for q in (0, 20, 50, 95, 100)] == [
         1.0,

@@ -11,7 +11,14 @@ from collections.abc import AsyncIterator
 import pytest
 
 from aeroweaver_edge.app import run_daemon
-from aeroweaver_edge.config import AgentConfig, MeshConfig, SimConfig, UavConfig
+from aeroweaver_edge.config import (
+    AgentConfig,
+    ConfigError,
+    MeshConfig,
+    SecurityConfig,
+    SimConfig,
+    UavConfig,
+)
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
 from aeroweaver_edge.orchestration.swarm import mesh_configs
@@ -96,6 +103,18 @@ async def test_no_daemon_up_is_one_clear_error() -> None:
     cmdr_cfg, _ = mesh_configs(f"ms-{uuid.uuid4().hex[:8]}", star=False)
     opts = MissionStartOptions(text=COVER, swarm="nobody", mesh=cmdr_cfg, roster_wait_s=0.3)
     with pytest.raises(RuntimeError, match=r"no UAV daemon of swarm 'nobody' is up \(waited 0 s\)"):
+        await start_mission(opts)
+
+
+async def test_a_secured_sim_world_without_the_world_identity_is_refused() -> None:
+    """The world must speak as itself on a secured mesh: refused before any session opens
+    (nothing listens on the endpoint, so an attempt to open would fail differently)."""
+    security = SecurityConfig(
+        identity="cmdr", ca="ca.pem", cert="cmdr.pem", key="cmdr.key", identities="ids.json"
+    )
+    mesh = MeshConfig(listen=["tls/127.0.0.1:9"], security=security)
+    opts = MissionStartOptions(text=COVER, mesh=mesh, sim_world=True)
+    with pytest.raises(ConfigError, match=r"^a secured mission with the sim world needs the world"):
         await start_mission(opts)
 
 
