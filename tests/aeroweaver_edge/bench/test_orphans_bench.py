@@ -17,3 +17,4 @@ def test_one_kill_leaves_no_daemon_and_no_directory(capsys: pytest.CaptureFixtur
     assert (out["kills"], out["daemons_killed_with_it"]) == (1, 3)
     assert (out["orphaned_daemons"], out["dirs_left"]) == (0, 0)
     assert set(out["daemons_gone_s"]) == {"p50", "p95", "max"}
+    assert out["daemon_exits"] == {"exit 0": 3}  # a clean stop on the parent-death SIGTERM
