@@ -168,14 +168,26 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stop_now(signum: int, _frame: object) -> None:
+    raise Stopped(signum)
+
+
 def cmd_daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.run_dir import attach_to_run
 
+    # A SIGTERM (the parent-death signal, systemctl stop) before the event loop handles
+    # signals -- imports, config, sessions opening -- must still run the ``finally`` below,
+    # or a run whose daemons were all still starting leaves its directory behind.
+    signal.signal(signal.SIGTERM, _stop_now)
     # Started by a simulated run: die with it, and the last one out removes its directory.
     member = attach_to_run(os.environ)
     try:
         return _daemon(args)
+    except Stopped as stop:  # stopped before the loop ran
+        return 0 if stop.signum == signal.SIGTERM else 130
     finally:
+        # The loop puts SIGTERM back to its default when it closes: ignore it while leaving.
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if member is not None:
             member.leave()
 

@@ -145,6 +145,7 @@ class UavDaemon:
         self.headers = headers
         self.memory = memory
         self.mission = MissionState(cfg.uav, track_commander=True)
+        self._holding_for_commander = False
         self._need_catch_up = asyncio.Event()
         self.stats = DaemonStats()
         self._peer_link = None
@@ -412,10 +413,13 @@ class UavDaemon:
                     break
                 view = self.mission.view()
                 # Flight phases: launch once a mission is assigned; land/return when it ends.
+                # The Commander gone mid-mission is not the mission's end: hold (the round
+                # holds without a view) and wait for it, in the air, however long it takes.
                 if view is not None:
                     await self.phases.launch()
-                elif self.phases.flying:
+                elif self.phases.flying and not self.mission.commander_lost:
                     await self.phases.finish("mission ended")
+                self._note_commander_loss(view)
                 await self._warm(view)
                 self._route(view)
                 sent_before = _llm_requests(self.rc.selector)
@@ -442,6 +446,19 @@ class UavDaemon:
             if self._peer_link is not None:
                 await self._peer_link.aclose()
         return self.stats
+
+    def _note_commander_loss(self, view: MissionView | None) -> None:
+        """Log once per loss that a flying UAV holds for a vanished Commander."""
+        if view is None and self.phases.flying and self.mission.commander_lost:
+            if not self._holding_for_commander:
+                self._holding_for_commander = True
+                log.warning(
+                    "%s: the Commander went away mid-mission; holding and waiting for it",
+                    self.uav,
+                )
+        elif view is not None and self._holding_for_commander:
+            self._holding_for_commander = False
+            log.warning("%s: the Commander is back; carrying on", self.uav)
 
     def _route(self, view: MissionView | None) -> None:
         """Give the peer channel this UAV's role and its task's routing when they change."""

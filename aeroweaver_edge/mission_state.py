@@ -45,6 +45,7 @@ class MissionState:
     # epoch of the next one (a restarted Commander is caught up by a query instead).
     _early: list[tuple[MissionContext | Assignment, bool]] = field(default_factory=list)
     _ever_alive: bool = False
+    _last_state: str = ""  # state of the last context taken; kept when the session ends
 
     def update_context(self, ctx: MissionContext, *, authenticated: bool = False) -> None:
         """Take ``ctx`` if it is admitted and newer; a refusal is counted in ``rejected``."""
@@ -52,6 +53,7 @@ class MissionState:
             cur = self.context
             if cur is None or (ctx.h.epoch, ctx.h.seq) > (cur.h.epoch, cur.h.seq):
                 self.context = ctx
+                self._last_state = ctx.state
                 self.changes += 1
 
     def update_assignment(self, a: Assignment, *, authenticated: bool = False) -> None:
@@ -67,6 +69,18 @@ class MissionState:
     def commander_is_alive(self) -> bool:
         """The Commander's token is up (as last told by ``commander_alive``)."""
         return self._alive
+
+    @property
+    def commander_lost(self) -> bool:
+        """The tracked Commander's session went away in the middle of an active mission
+        (not after it ended the mission): a flying UAV holds and waits for it to come back
+        (notes/safety.md, "Commander loss"), it does not treat that as the mission's end."""
+        return (
+            self.track_commander
+            and self._ever_alive
+            and not self._alive
+            and self._last_state == "active"
+        )
 
     def commander_alive(self, alive: bool) -> None:
         """The Commander's liveliness token appeared (True) or went away (False)."""

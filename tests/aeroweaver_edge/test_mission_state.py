@@ -128,3 +128,23 @@ def test_within_a_session_older_data_does_not_replace_newer() -> None:
     assert view is not None
     assert (view.role, view.mission_id) == ("relay", "m")
     assert s.rejected.total() == 0
+
+
+def test_a_commander_lost_mid_mission_is_told_apart_from_a_mission_it_ended() -> None:
+    """A flying field UAV holds and waits when the Commander vanishes mid-mission, but
+    lands when a Commander ended the mission and then left (issue 8)."""
+    s = MissionState("uav0", track_commander=True)
+    assert not s.commander_lost  # never had a Commander: nothing lost
+    live(s)
+    assert not s.commander_lost
+    s.commander_alive(False)
+    assert s.commander_lost
+    s.commander_alive(True)  # back: a new session
+    assert not s.commander_lost
+    s.update_context(ctx(6, 1))
+    s.update_context(ctx(6, 2, state="ended"))  # it ended the mission ...
+    s.commander_alive(False)  # ... and then left
+    assert not s.commander_lost
+    untracked = live(MissionState("uav0"))
+    untracked.commander_alive(False)
+    assert not untracked.commander_lost  # without tracking the token decides nothing

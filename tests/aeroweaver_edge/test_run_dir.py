@@ -161,3 +161,62 @@ def running(pid: int) -> bool:
     except (OSError, IndexError):
         return False
     return state not in ("Z", "X")
+
+
+def test_a_daemon_stopped_during_start_up_still_removes_the_directory(tmp_path: Path) -> None:
+    """SIGTERM (what the parent-death signal sends) reaching a daemon process of a killed
+    run while it is still starting (imports, config: before its event loop handles
+    signals) must not kill it outright: it stops cleanly, and as the last one out it
+    removes the run's directory. Before: it died of the signal and, when every daemon of
+    the run was still starting, the directory stayed behind."""
+    from aeroweaver_edge.config import AgentConfig, UavConfig
+    from aeroweaver_edge.run_dir import ENV_PARENT
+
+    run = RunDir.create(parent=tmp_path)
+    config = run.path / "uav0.json"
+    config.write_text(
+        UavConfig(uav="uav0", agent=AgentConfig(selector="scripted", beta=0.0)).model_dump_json(),
+        encoding="utf-8",
+    )
+    daemon = subprocess.Popen(
+        [sys.executable, "-m", "aeroweaver_edge.cli", "daemon", "--config", str(config)],
+        env={**os.environ, ENV_DIR: str(run.path), ENV_PARENT: str(os.getpid())},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        # The run's own process "dies" (its lock goes); the daemon is the last member.
+        assert run._fd is not None
+        os.close(run._fd)
+        run._fd = None
+        # Wait (bounded) until the daemon has joined: our exclusive try then fails.
+        probe = os.open(run.path / LOCK_NAME, os.O_RDWR)
+        try:
+            deadline = time.monotonic() + 60
+            while _exclusive_free(probe):
+                assert daemon.poll() is None, daemon.stderr.read() if daemon.stderr else ""
+                assert time.monotonic() < deadline, "the daemon never joined its run"
+                time.sleep(0.002)
+        finally:
+            os.close(probe)
+        daemon.send_signal(signal.SIGTERM)  # at once: most likely still importing
+        _out, err = daemon.communicate(timeout=60)
+    finally:
+        if daemon.poll() is None:
+            kill9(daemon)  # type: ignore[arg-type]
+    assert daemon.returncode == 0, err
+    assert "Traceback" not in err
+    assert not run.path.exists()
+
+
+def _exclusive_free(fd: int) -> bool:
+    """Whether nobody holds the lock (we take it exclusively and release it at once)."""
+    import fcntl
+
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    fcntl.flock(fd, fcntl.LOCK_UN)
+    return True

@@ -8,8 +8,8 @@ It creates a TUN device on each side (``HOST_IF`` here, ``NS_IF`` inside ``NETNS
 ``ready``, then forwards every IP packet from one to the other, dropping each with
 probability ``LOSS_PCT``% and delivering the rest ``DELAY_MS`` later, each direction on
 its own: the kernels on both sides see real packets, so TCP retransmits and backs off as it
-would over netem. Commands on stdin: ``loss P``, ``delay MS``, ``quit`` (prints the
-counters as one JSON line and exits). Linux, root.
+would over netem. Commands on stdin: ``loss P``, ``delay MS``, ``stats`` (prints the
+counters as one JSON line), ``quit`` (prints them and exits). Linux, root.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ def main(argv: list[str]) -> int:
     inner = open_tun(ns_if)
     setns(own)
     peer = {host: inner, inner: host}
-    counts = {"forwarded": 0, "dropped": 0, "bytes": 0}
+    counts = {"forwarded": 0, "dropped": 0, "undeliverable": 0, "bytes": 0}
     queue: list[tuple[float, int, int, bytes]] = []
     n = 0
     print("ready", flush=True)
@@ -66,7 +66,7 @@ def main(argv: list[str]) -> int:
             try:
                 os.write(dst, pkt)
             except OSError:
-                counts["dropped"] += 1  # the interface went down (a partition): lost
+                counts["undeliverable"] += 1  # that side's interface is down (or not up yet)
         timeout = max(0.0, queue[0][0] - now) if queue else 1.0
         readable, _, _ = select.select([host, inner, stdin], [], [], timeout)
         for fd in readable:
@@ -75,7 +75,9 @@ def main(argv: list[str]) -> int:
                 if not line or line[0] == "quit":
                     print(json.dumps(counts), flush=True)
                     return 0
-                if line[0] == "loss":
+                if line[0] == "stats":
+                    print(json.dumps(counts), flush=True)
+                elif line[0] == "loss":
                     loss = float(line[1]) / 100.0
                 elif line[0] == "delay":
                     delay = float(line[1]) / 1000.0

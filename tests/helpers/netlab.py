@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
+import socket
 import subprocess
 import sys
 import uuid
@@ -158,6 +160,52 @@ class NetLab:
         # bringing a link down drops its routes; the peer route comes back with the address
         _ip("route", "replace", seg.ns_ip, "dev", seg.host_if)
         _ip("route", "replace", seg.host_ip, "dev", seg.ns_if, ns=seg.ns)
+
+    def handshakes_ms(self, seg: Segment, n: int = 20) -> list[float]:
+        """TCP handshake times (ms) from inside ``seg``'s namespace to a socket listening
+        on this side of its link: one round trip each (a lost SYN or SYN-ACK costs the
+        kernel's 1 s retransmission), so the link's delay and loss show as measured."""
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as srv:
+            srv.bind((seg.host_ip, 0))
+            srv.listen(n + 8)  # the kernel completes handshakes without accept()
+            port = srv.getsockname()[1]
+            probe = (
+                "import socket, sys, time\n"
+                "for _ in range(int(sys.argv[3])):\n"
+                "    t = time.monotonic()\n"
+                "    socket.create_connection((sys.argv[1], int(sys.argv[2])), 10).close()\n"
+                "    print((time.monotonic() - t) * 1000, flush=True)\n"
+            )
+            done = subprocess.run(
+                [*seg.prefix(), sys.executable, "-c", probe, seg.host_ip, str(port), str(n)],
+                check=True, capture_output=True, text=True, timeout=30 + 12 * n,
+            )  # fmt: skip
+        return [float(x) for x in done.stdout.split()]
+
+    def stats(self, seg: Segment) -> dict[str, int]:
+        """Packets the link carried and dropped so far, both directions: the forwarder's
+        counters, or the netem qdiscs' on both ends of a veth pair. Proves a test's
+        impairment really happened."""
+        if seg.forwarder is not None:
+            assert seg.forwarder.stdin is not None
+            assert seg.forwarder.stdout is not None
+            seg.forwarder.stdin.write("stats\n")
+            seg.forwarder.stdin.flush()
+            counts: dict[str, int] = json.loads(seg.forwarder.stdout.readline())
+            return counts
+        out = {"forwarded": 0, "dropped": 0}
+        for dev, ns in ((seg.host_if, None), (seg.ns_if, seg.ns)):
+            cmd = ["tc", "-s", "qdisc", "show", "dev", dev]
+            text = subprocess.run(
+                cmd if ns is None else ["ip", "netns", "exec", ns, *cmd],
+                check=True, capture_output=True, text=True, timeout=30,
+            ).stdout  # fmt: skip
+            # " Sent 1234 bytes 12 pkt (dropped 3, overlimits 0 requeues 0)" (root qdisc first)
+            m = re.search(r"Sent \d+ bytes (\d+) pkt \(dropped (\d+),", text)
+            if m is not None:
+                out["forwarded"] += int(m.group(1))
+                out["dropped"] += int(m.group(2))
+        return out
 
     def close(self) -> None:
         for seg in self.segments:

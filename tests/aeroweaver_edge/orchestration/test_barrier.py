@@ -28,6 +28,16 @@ def report(
     )  # fmt: skip
 
 
+async def rechecked(b: ExperienceBarrier) -> None:
+    """Yield until the waiter has re-evaluated after the last report (it clears the change
+    event before it waits again): the negative checks read the barrier's state, not a clock."""
+    for _ in range(100):
+        await asyncio.sleep(0)
+        if not b._changed.is_set():
+            return
+    raise AssertionError("the waiter never re-checked the last report")
+
+
 def played(b: ExperienceBarrier, episode: int, uavs: set[str] = ALL, epoch: int = 1) -> None:
     for u in sorted(uavs):
         b.on_report(report(u, episode, phase="round", epoch=epoch))
@@ -46,7 +56,7 @@ async def test_opens_when_every_same_role_peer_took_what_was_shared() -> None:
         if u != "uav2":
             b.on_report(report(u, 0, shared=shares[u], taken=n))
     b.on_report(report("uav2", 0, shared=5, taken=6))  # one short
-    await asyncio.sleep(0.05)
+    await rechecked(b)
     assert not wait.done()
     b.on_report(report("uav2", 0, shared=5, taken=7))
     assert await asyncio.wait_for(wait, 5.0) is True
@@ -64,7 +74,7 @@ async def test_a_sharer_that_has_not_shared_holds_the_barrier() -> None:
     b.on_report(report("uav3", 0, shared=2, taken=0))
     b.on_report(report("uav2", 0, taken=4))  # took everything, has not shared yet (-1)
     wait = asyncio.create_task(b.wait(0, ALL, lambda: ALL))
-    await asyncio.sleep(0.05)
+    await rechecked(b)
     assert not wait.done()
     b.on_report(report("uav2", 0, shared=0, taken=4))  # nothing of its own to share
     assert await asyncio.wait_for(wait, 5.0) is True

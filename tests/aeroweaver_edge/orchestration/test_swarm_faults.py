@@ -3,11 +3,11 @@ and an operator stop."""
 
 from __future__ import annotations
 
-import asyncio
 import os
 import signal
 import subprocess
 import sys
+import time
 
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
@@ -74,11 +74,20 @@ async def test_a_reassignment_mid_mission_is_picked_up_by_the_running_daemons() 
 def test_operator_stop_ends_the_run_cleanly(tmp_path: os.PathLike[str]) -> None:
     proc = subprocess.Popen(
         [sys.executable, "-m", "aeroweaver_edge.cli", "sim", "coverage", "--selector", "scripted",
-         "--episodes", "200", "--quiet"],
+         "--episodes", "200"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )  # fmt: skip
     try:
-        asyncio.run(asyncio.sleep(4.0))  # past start-up, into the episodes
+        # Into the episodes (a round flown), whatever the machine's load: not a fixed sleep.
+        assert proc.stdout is not None
+        deadline = time.monotonic() + 120.0
+        for line in proc.stdout:
+            if line.startswith("ep ") and " round " in line:
+                break
+            assert time.monotonic() < deadline, "no round within the bound"
+        else:
+            raise AssertionError(f"the run ended before any round: {proc.wait()}")
         proc.send_signal(signal.SIGINT)
         _out, err = proc.communicate(timeout=30)
     finally:
