@@ -1,8 +1,9 @@
 """Why the experience correction does what it does: figures from adaptation traces.
 
 ``python -m aeroweaver_edge.bench.adaptation_why DIR [--gamma 0.95]`` reads every
-``DIR/runs/<task>/seed<S>/<variant>/trace.jsonl`` written by ``bench.adaptation`` and
-prints (and writes to ``DIR/why.md``) per task and variant:
+``DIR/runs/<task>/seed<S>/<variant>/trace.jsonl`` written by ``bench.adaptation`` (with
+``--bench``: a ``bench run`` directory's AeroWeaver and beta = 0 cells) and prints (and
+writes to ``DIR/why.md``) per task and variant:
 
 * how far apart the base scores are (top-1 minus top-2 log-prob of the labels that came
   back) against how far apart the correction pushes them (beta times the spread of the
@@ -193,6 +194,40 @@ def analyse(out: Path, gamma: float) -> list[dict[str, Any]]:
     return rows
 
 
+BENCH_VARIANTS = {"aeroweaver": "beta=0.8", "beta0": "beta=0"}  # same selector, beta differs
+
+
+def analyse_bench(out: Path, gamma: float) -> list[dict[str, Any]]:
+    """The same figures from a ``bench run`` directory's AeroWeaver and beta = 0 cells
+    (``runs/<task>/<condition>/seed<S>.trace.jsonl``): one episode per cell, so the
+    correction acts only on the episode's own in-flight records."""
+    rows = []
+    for cond, variant in BENCH_VARIANTS.items():
+        for cell_path in sorted((out / "runs").glob(f"*/{cond}/seed*.json")):
+            cell = json.loads(cell_path.read_text(encoding="utf-8"))
+            b = cell.get("bench", {})
+            if not b.get("complete"):
+                continue
+            trace = read_trace(out / b["trace"])
+            header = next((r for r in trace if r.get("type") == "run"), {})
+            beta = float(header.get("beta", 0.8 if cond == "aeroweaver" else 0.0))
+            rows.append(
+                {
+                    "task": b["task"],
+                    "seed": b["seed"],
+                    "variant": variant,
+                    "selector": cell["summary"].get("selector"),
+                    "mean_return": _mean(
+                        [e["team_return"] for e in cell["episodes"] if e["team_return"] is not None]
+                    ),
+                    **decision_figures(trace, beta),
+                    "age_bias": age_bias([trace], gamma),
+                    "skills": {},
+                }
+            )
+    return rows
+
+
 def _f(x: float | None, digits: int = 2) -> str:
     return "–" if x is None else f"{x:.{digits}f}"
 
@@ -284,9 +319,14 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m aeroweaver_edge.bench.adaptation_why")
     p.add_argument("dir", help="an adaptation output directory (--out of bench.adaptation)")
     p.add_argument("--gamma", type=float, default=0.95)
+    p.add_argument(
+        "--bench",
+        action="store_true",
+        help="DIR is a `bench run` directory: compare its AeroWeaver and beta = 0 cells",
+    )
     args = p.parse_args(argv)
     out = Path(args.dir)
-    rows = analyse(out, args.gamma)
+    rows = analyse_bench(out, args.gamma) if args.bench else analyse(out, args.gamma)
     if not rows:
         print(f"no adaptation runs under {out}/runs", file=sys.stderr)
         return 2
