@@ -53,6 +53,10 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
     scored = corrected = to_hold = to_last = base_last = bound = to_unseen = 0
     adv_last: list[float] = []
     adv_other: list[float] = []
+    # corrected picks of hold: entries (not holding the round before) and repeats
+    hold_entry = hold_entry_unseen = 0
+    adv_hold_repeat: list[float] = []
+    adv_winner_at_entry: list[float] = []
     holds = dict.fromkeys(HOLD_CAUSES, 0)
     decisions = 0
     previous: dict[tuple[int, str], str] = {}  # (episode, uav) -> last chosen skill
@@ -87,6 +91,13 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
                     corrected += 1
                     pick = skills.get(d.get("chosen") or "", "")
                     to_hold += pick == HOLD_SKILL
+                    a_pick = adv.get(d.get("chosen") or "", 0.0)
+                    if pick == HOLD_SKILL and last == HOLD_SKILL:
+                        adv_hold_repeat.append(a_pick)
+                    elif pick == HOLD_SKILL:
+                        hold_entry += 1
+                        hold_entry_unseen += a_pick == 0.0
+                        adv_winner_at_entry.append(adv.get(base_winner, 0.0))
                     to_last += last is not None and pick == last
                     # an option without experience (A = 0) beat a base winner whose skill
                     # looked worse than its neighbourhood (A < 0): "unseen means average"
@@ -107,6 +118,11 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
         ),
         "corrected": corrected,
         "corrected_to_hold": to_hold,
+        "hold_entries": hold_entry,
+        "hold_entries_unseen": hold_entry_unseen,
+        "advantage_winner_at_hold_entry_mean": _mean(adv_winner_at_entry),
+        "hold_repeats": len(adv_hold_repeat),
+        "advantage_hold_at_repeat_mean": _mean(adv_hold_repeat),
         "corrected_to_last_skill": to_last,
         "corrected_to_unseen": to_unseen,
         "base_winner_is_last_skill": base_last,
@@ -266,6 +282,30 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             f"{_f(pooled('advantage_other_skills_mean'))} | "
             f"{sum(r['bound_rule'] for r in rs)} | {h['chosen']} / {h['safety_gate']} / "
             f"{h['llm_failure'] + h['deadline']} / {h['invalid_answer']} |"
+        )
+    lines += [
+        "",
+        "Corrected picks of hold_position: entries (the UAV did not hold the round before), "
+        "of which hold had no experience (A = 0), and the base winner's mean advantage there; "
+        "repeats (it held the round before) and hold's mean advantage there:",
+        "",
+        "| task | variant | entries | of which A(hold) = 0 | A(base winner) at entries | "
+        "repeats | A(hold) at repeats |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for (task, variant), rs in groups.items():
+
+        def weighted(key: str, n_key: str, rs: list[dict[str, Any]] = rs) -> float | None:
+            pairs = [(r[key], r[n_key]) for r in rs if r[key] is not None and r[n_key]]
+            n = sum(k for _, k in pairs)
+            return sum(v * k for v, k in pairs) / n if n else None
+
+        lines.append(
+            f"| {task} | {variant} | {sum(r['hold_entries'] for r in rs)} | "
+            f"{sum(r['hold_entries_unseen'] for r in rs)} | "
+            f"{_f(weighted('advantage_winner_at_hold_entry_mean', 'hold_entries'))} | "
+            f"{sum(r['hold_repeats'] for r in rs)} | "
+            f"{_f(weighted('advantage_hold_at_repeat_mean', 'hold_repeats'))} |"
         )
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     keys = [1, 2, 4, 8, 16]

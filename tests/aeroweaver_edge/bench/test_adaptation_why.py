@@ -63,6 +63,21 @@ def test_decision_figures() -> None:
     assert f["advantage_last_skill_mean"] == pytest.approx(2.0)
     assert f["advantage_other_skills_mean"] == pytest.approx(-0.5)
     assert f["holds_by_cause"]["chosen"] == 1
+    # the UAV held in round 0 (its skill was hold_position): round 1's pick is a repeat
+    assert (f["hold_entries"], f["hold_repeats"]) == (0, 1)
+    assert f["advantage_hold_at_repeat_mean"] == pytest.approx(2.0)
+
+
+def test_hold_entry_counted_with_unseen_hold_and_the_winner_advantage() -> None:
+    pick = {"options": OPTS, "base": {"A": -0.5, "B": -1.0, "C": -1.1},
+            "advantage": {"A": -3.0, "B": 1.0}, "chosen": "C", "corrected": True,
+            "skill": "hold_position", "hold_cause": "chosen"}  # fmt: skip
+    first = {**pick, "corrected": False, "chosen": "A", "skill": "cover_landmark"}
+    trace = [row(0, {"uav0": first}, {}), row(1, {"uav0": pick}, {}), row(2, {"uav0": pick}, {})]
+    f = decision_figures(trace, beta=0.8)
+    assert (f["hold_entries"], f["hold_entries_unseen"], f["hold_repeats"]) == (1, 1, 1)
+    assert f["advantage_winner_at_hold_entry_mean"] == pytest.approx(-3.0)
+    assert f["advantage_hold_at_repeat_mean"] == pytest.approx(0.0)
 
 
 def test_age_bias_of_in_flight_returns() -> None:
@@ -116,4 +131,6 @@ def test_bench_cells_compared_as_beta_variants(tmp_path: Path) -> None:
     assert zero["corrected"] == 0
     assert zero["base_gap_median"] == pytest.approx(0.5)
     assert main([str(tmp_path), "--bench"]) == 0
-    assert "| coverage | beta=0.8 | 1 |" in (tmp_path / "why.md").read_text()
+    why = (tmp_path / "why.md").read_text()
+    assert "| coverage | beta=0.8 | 1 |" in why
+    assert "| coverage | beta=0.8 | 1 | 0 | -1.00 | 0 | – |" in why  # an entry, A(hold) 2.0
