@@ -1,8 +1,9 @@
 """Why the experience correction does what it does: figures from adaptation traces.
 
 ``python -m aeroweaver_edge.bench.adaptation_why DIR [--gamma 0.95]`` reads every
-``DIR/runs/<task>/seed<S>/<variant>/trace.jsonl`` written by ``bench.adaptation`` and
-prints (and writes to ``DIR/why.md``) per task and variant:
+``DIR/runs/<task>/seed<S>/<variant>/trace.jsonl`` written by ``bench.adaptation`` (with
+``--bench``: a ``bench run`` directory's AeroWeaver and beta = 0 cells) and prints (and
+writes to ``DIR/why.md``) per task and variant:
 
 * how far apart the base scores are (top-1 minus top-2 log-prob of the labels that came
   back) against how far apart the correction pushes them (beta times the spread of the
@@ -52,6 +53,10 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
     scored = corrected = to_hold = to_last = base_last = bound = to_unseen = 0
     adv_last: list[float] = []
     adv_other: list[float] = []
+    # corrected picks of hold: entries (not holding the round before) and repeats
+    hold_entry = hold_entry_unseen = 0
+    adv_hold_repeat: list[float] = []
+    adv_winner_at_entry: list[float] = []
     holds = dict.fromkeys(HOLD_CAUSES, 0)
     decisions = 0
     previous: dict[tuple[int, str], str] = {}  # (episode, uav) -> last chosen skill
@@ -86,6 +91,13 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
                     corrected += 1
                     pick = skills.get(d.get("chosen") or "", "")
                     to_hold += pick == HOLD_SKILL
+                    a_pick = adv.get(d.get("chosen") or "", 0.0)
+                    if pick == HOLD_SKILL and last == HOLD_SKILL:
+                        adv_hold_repeat.append(a_pick)
+                    elif pick == HOLD_SKILL:
+                        hold_entry += 1
+                        hold_entry_unseen += a_pick == 0.0
+                        adv_winner_at_entry.append(adv.get(base_winner, 0.0))
                     to_last += last is not None and pick == last
                     # an option without experience (A = 0) beat a base winner whose skill
                     # looked worse than its neighbourhood (A < 0): "unseen means average"
@@ -106,6 +118,11 @@ def decision_figures(trace: Iterable[Mapping[str, Any]], beta: float) -> dict[st
         ),
         "corrected": corrected,
         "corrected_to_hold": to_hold,
+        "hold_entries": hold_entry,
+        "hold_entries_unseen": hold_entry_unseen,
+        "advantage_winner_at_hold_entry_mean": _mean(adv_winner_at_entry),
+        "hold_repeats": len(adv_hold_repeat),
+        "advantage_hold_at_repeat_mean": _mean(adv_hold_repeat),
         "corrected_to_last_skill": to_last,
         "corrected_to_unseen": to_unseen,
         "base_winner_is_last_skill": base_last,
@@ -193,6 +210,40 @@ def analyse(out: Path, gamma: float) -> list[dict[str, Any]]:
     return rows
 
 
+BENCH_VARIANTS = {"aeroweaver": "beta=0.8", "beta0": "beta=0"}  # same selector, beta differs
+
+
+def analyse_bench(out: Path, gamma: float) -> list[dict[str, Any]]:
+    """The same figures from a ``bench run`` directory's AeroWeaver and beta = 0 cells
+    (``runs/<task>/<condition>/seed<S>.trace.jsonl``): one episode per cell, so the
+    correction acts only on the episode's own in-flight records."""
+    rows = []
+    for cond, variant in BENCH_VARIANTS.items():
+        for cell_path in sorted((out / "runs").glob(f"*/{cond}/seed*.json")):
+            cell = json.loads(cell_path.read_text(encoding="utf-8"))
+            b = cell.get("bench", {})
+            if not b.get("complete"):
+                continue
+            trace = read_trace(out / b["trace"])
+            header = next((r for r in trace if r.get("type") == "run"), {})
+            beta = float(header.get("beta", 0.8 if cond == "aeroweaver" else 0.0))
+            rows.append(
+                {
+                    "task": b["task"],
+                    "seed": b["seed"],
+                    "variant": variant,
+                    "selector": cell["summary"].get("selector"),
+                    "mean_return": _mean(
+                        [e["team_return"] for e in cell["episodes"] if e["team_return"] is not None]
+                    ),
+                    **decision_figures(trace, beta),
+                    "age_bias": age_bias([trace], gamma),
+                    "skills": {},
+                }
+            )
+    return rows
+
+
 def _f(x: float | None, digits: int = 2) -> str:
     return "–" if x is None else f"{x:.{digits}f}"
 
@@ -231,6 +282,30 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             f"{_f(pooled('advantage_other_skills_mean'))} | "
             f"{sum(r['bound_rule'] for r in rs)} | {h['chosen']} / {h['safety_gate']} / "
             f"{h['llm_failure'] + h['deadline']} / {h['invalid_answer']} |"
+        )
+    lines += [
+        "",
+        "Corrected picks of hold_position: entries (the UAV did not hold the round before), "
+        "of which hold had no experience (A = 0), and the base winner's mean advantage there; "
+        "repeats (it held the round before) and hold's mean advantage there:",
+        "",
+        "| task | variant | entries | of which A(hold) = 0 | A(base winner) at entries | "
+        "repeats | A(hold) at repeats |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for (task, variant), rs in groups.items():
+
+        def weighted(key: str, n_key: str, rs: list[dict[str, Any]] = rs) -> float | None:
+            pairs = [(r[key], r[n_key]) for r in rs if r[key] is not None and r[n_key]]
+            n = sum(k for _, k in pairs)
+            return sum(v * k for v, k in pairs) / n if n else None
+
+        lines.append(
+            f"| {task} | {variant} | {sum(r['hold_entries'] for r in rs)} | "
+            f"{sum(r['hold_entries_unseen'] for r in rs)} | "
+            f"{_f(weighted('advantage_winner_at_hold_entry_mean', 'hold_entries'))} | "
+            f"{sum(r['hold_repeats'] for r in rs)} | "
+            f"{_f(weighted('advantage_hold_at_repeat_mean', 'hold_repeats'))} |"
         )
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     keys = [1, 2, 4, 8, 16]
@@ -284,9 +359,14 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m aeroweaver_edge.bench.adaptation_why")
     p.add_argument("dir", help="an adaptation output directory (--out of bench.adaptation)")
     p.add_argument("--gamma", type=float, default=0.95)
+    p.add_argument(
+        "--bench",
+        action="store_true",
+        help="DIR is a `bench run` directory: compare its AeroWeaver and beta = 0 cells",
+    )
     args = p.parse_args(argv)
     out = Path(args.dir)
-    rows = analyse(out, args.gamma)
+    rows = analyse_bench(out, args.gamma) if args.bench else analyse(out, args.gamma)
     if not rows:
         print(f"no adaptation runs under {out}/runs", file=sys.stderr)
         return 2

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from aeroweaver_edge.hold_reasons import HOLD_CAUSES
+from aeroweaver_edge.json_out import write_json_file
 
 PAPER_K = {  # the paper's task scales K_t for relative ablation scores (Table 3)
     "coverage": 17.077,
@@ -78,8 +79,55 @@ class CellStats:
         return (self.prompt - self.cached) / calls if calls else None
 
     @property
+    def uncached_per_decision(self) -> float | None:
+        return (self.prompt - self.cached) / self.decisions if self.decisions else None
+
+    @property
     def invalid_rate(self) -> float | None:
         return self.invalid / self.decisions if self.decisions else None
+
+    def absorb(self, other: CellStats) -> None:
+        """Pool another cell's episodes into this one (a condition over all tasks)."""
+        self.seeds += other.seeds
+        self.returns += other.returns
+        self.tokens += other.tokens
+        self.central_tokens += other.central_tokens
+        self.calls += other.calls
+        self.latencies += other.latencies
+        self.decisions += other.decisions
+        self.invalid += other.invalid
+        for k, v in other.holds.items():
+            self.holds[k] = self.holds.get(k, 0) + v
+        self.prompt += other.prompt
+        self.cached += other.cached
+        self.model = self.model or other.model
+
+    def figures(self) -> dict[str, Any]:
+        """The table's figures as numbers (summary.json)."""
+
+        def r(x: float | None, digits: int = 3) -> float | None:
+            return None if x is None else round(x, digits)
+
+        episodes = len(self.calls)
+        return {
+            "cells": len(self.seeds),
+            "episodes": episodes,
+            "return_mean": r(self.mean(self.returns)),
+            "return_sd": r(self.sd),
+            "tokens_per_episode": r(self.mean(self.tokens), 1),
+            "central_tokens_per_episode": r(self.mean(self.central_tokens), 1),
+            "llm_calls_per_episode": r(self.mean(self.calls), 2),
+            "decisions": self.decisions,
+            "latency_p50_s": r(self.percentile(0.5)),
+            "latency_p95_s": r(self.percentile(0.95)),
+            "uncached_prompt_per_call": r(self.uncached_per_call, 1),
+            "uncached_prompt_per_decision": r(self.uncached_per_decision, 1),
+            "invalid_rate": r(self.invalid_rate, 4),
+            "holds_per_episode": {
+                k: r(v / episodes, 2) for k, v in self.holds.items() if v and episodes
+            },
+            "model": self.model,
+        }
 
 
 def load_cells(out: Path) -> list[dict[str, Any]]:
@@ -120,6 +168,27 @@ def aggregate(cells: Iterable[dict[str, Any]]) -> dict[tuple[str, str], CellStat
                 s.prompt += int(e["tokens"][side]["prompt"])
                 s.cached += int(e["tokens"][side]["prompt_cached"])
     return stats
+
+
+RATIO_BASELINES = ("hmas2", "centralized")
+
+
+def token_ratios(
+    stats: dict[tuple[str, str], CellStats], tasks: Sequence[str]
+) -> dict[str, dict[str, float | None]]:
+    """Per task: AeroWeaver's mean tokens per episode over each baseline's (HMAS-2,
+    Centralized); None where either side has no finished cell or the baseline spent none."""
+    ratios: dict[str, dict[str, float | None]] = {}
+    for t in tasks:
+        a = stats.get((t, "aeroweaver"))
+        row: dict[str, float | None] = {}
+        for c in RATIO_BASELINES:
+            b = stats.get((t, c))
+            num = a.mean(a.tokens) if a else None
+            den = b.mean(b.tokens) if b else None
+            row[c] = num / den if num is not None and den else None
+        ratios[t] = row
+    return ratios
 
 
 def _num(x: float | None, digits: int = 2) -> str:
@@ -171,13 +240,9 @@ def markdown(
             "| task | AeroWeaver / HMAS-2 | AeroWeaver / Centralized |",
             "|---|---|---|",
         ]
+        ratios = token_ratios(stats, tasks)
         for t in tasks:
-            a = stats.get((t, "aeroweaver"))
-            row = []
-            for c in ("hmas2", "centralized"):
-                b = stats.get((t, c))
-                ok = a and b and a.tokens and b.tokens and b.mean(b.tokens)
-                row.append(_num(a.mean(a.tokens) / b.mean(b.tokens), 2) if ok else "–")  # type: ignore[union-attr, operator]
+            row = [_num(ratios[t][c], 2) for c in RATIO_BASELINES]
             out.append(f"| {t} | " + " | ".join(row) + " |")
     ablations = [c for c in ABLATIONS if c in conds]
     if "aeroweaver" in conds and ablations:
@@ -302,6 +367,31 @@ def csv_rows(cells: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
+def summary(
+    stats: dict[tuple[str, str], CellStats], tasks: Sequence[str], conditions: Sequence[str]
+) -> dict[str, Any]:
+    """A small machine-readable digest of the table: per task and condition, per condition
+    pooled over tasks, and the per-task token ratios."""
+    per: dict[str, dict[str, Any]] = {}
+    pooled: dict[str, CellStats] = {}
+    for t in tasks:
+        for c in conditions:
+            s = stats.get((t, c))
+            if s is None:
+                continue
+            per.setdefault(t, {})[c] = s.figures()
+            pooled.setdefault(c, CellStats("*", c, s.title)).absorb(s)
+    return {
+        "cells_finished": sum(len(s.seeds) for s in stats.values()),
+        "by_task": per,
+        "by_condition": {c: pooled[c].figures() for c in conditions if c in pooled},
+        "token_ratios": {
+            t: {f"aeroweaver/{c}": (None if v is None else round(v, 4)) for c, v in row.items()}
+            for t, row in token_ratios(stats, tasks).items()
+        },
+    }
+
+
 def write_report(out: Path, *, tasks: Sequence[str], conditions: Sequence[str]) -> None:
     cells = load_cells(out)
     rows = csv_rows(cells)
@@ -311,9 +401,19 @@ def write_report(out: Path, *, tasks: Sequence[str], conditions: Sequence[str]) 
         w.writerows(rows)
     stats = aggregate(cells)
     (out / "table.md").write_text(markdown(stats, tasks, conditions), encoding="utf-8")
+    write_json_file(out / "summary.json", summary(stats, tasks, conditions))
     from aeroweaver_edge.bench.plots import write_plots
 
     write_plots(out, stats, tasks, conditions)
 
 
-__all__ = ["CellStats", "aggregate", "csv_rows", "load_cells", "markdown", "write_report"]
+__all__ = [
+    "CellStats",
+    "aggregate",
+    "csv_rows",
+    "load_cells",
+    "markdown",
+    "summary",
+    "token_ratios",
+    "write_report",
+]

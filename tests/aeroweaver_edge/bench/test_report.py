@@ -1,0 +1,56 @@
+"""``bench.report``: token ratios and the JSON summary computed from the cells' figures."""
+
+from __future__ import annotations
+
+import pytest
+
+from aeroweaver_edge.bench.report import aggregate, summary, token_ratios
+
+from .test_runner import cell
+
+
+def test_token_ratios_per_task_from_mean_tokens() -> None:
+    cells = [
+        cell("coverage", "aeroweaver", 1, [-10.0], 100),
+        cell("coverage", "aeroweaver", 2, [-14.0], 300),  # mean 200
+        cell("coverage", "hmas2", 1, [-20.0], 1000),
+        cell("coverage", "centralized", 1, [-20.0], 400),
+        cell("coverage", "centralized", 2, [-20.0], 400),
+        cell("line_formation", "aeroweaver", 1, [-1.0], 50),
+        cell("line_formation", "centralized", 1, [-1.0], 0),  # spent nothing: no ratio
+        cell("goal_concealment", "hmas2", 1, [0.0], 10),  # no AeroWeaver cell: no ratio
+    ]
+    ratios = token_ratios(aggregate(cells), ["coverage", "line_formation", "goal_concealment"])
+    assert ratios["coverage"] == {"hmas2": pytest.approx(0.2), "centralized": pytest.approx(0.5)}
+    assert ratios["line_formation"] == {"hmas2": None, "centralized": None}
+    assert ratios["goal_concealment"] == {"hmas2": None, "centralized": None}
+
+
+def test_summary_per_task_pooled_per_condition_and_ratios() -> None:
+    cells = [
+        cell("coverage", "aeroweaver", 1, [-10.0], 100),
+        cell("line_formation", "aeroweaver", 1, [-14.0], 300),
+        cell("coverage", "hmas2", 1, [-20.0], 1000),
+    ]
+    s = summary(aggregate(cells), ["coverage", "line_formation"], ["aeroweaver", "hmas2"])
+    assert s["cells_finished"] == 3
+    cov = s["by_task"]["coverage"]["aeroweaver"]
+    assert cov["return_mean"] == -10.0
+    assert cov["return_sd"] is None
+    assert cov["tokens_per_episode"] == 100.0
+    assert cov["uncached_prompt_per_call"] == 25.0  # 100 prompt tokens, none cached, 4 calls
+    assert cov["uncached_prompt_per_decision"] == 25.0
+    assert cov["holds_per_episode"] == {"chosen": 1.0}
+    pooled = s["by_condition"]["aeroweaver"]
+    assert pooled["episodes"] == 2
+    assert pooled["return_mean"] == -12.0
+    assert pooled["tokens_per_episode"] == 200.0
+    assert pooled["decisions"] == 8
+    assert pooled["latency_p50_s"] == 0.3  # eight latencies 0.1..0.4, nearest rank
+    assert pooled["holds_per_episode"] == {"chosen": 1.0}
+    assert "line_formation" not in s["by_task"] or "hmas2" not in s["by_task"]["line_formation"]
+    assert s["token_ratios"]["coverage"] == {
+        "aeroweaver/hmas2": 0.1,
+        "aeroweaver/centralized": None,
+    }
+    assert s["token_ratios"]["line_formation"]["aeroweaver/hmas2"] is None
