@@ -184,6 +184,30 @@ def test_separation_hold_when_no_spare_gap_is_left() -> None:
     assert (sideways.held, sideways.vel) == (False, (0.0, 4.0, 0.0))  # not closing in
 
 
+def test_a_separation_hold_keeps_what_was_noted_before_it() -> None:
+    """The hold names separation and the earlier repairs, not the slide it replaces."""
+    out = GATE.gate(SetVelocity((20.0, 0.0, 0.0)), HOME, [(2.0, 0.0, -5.0)])
+    assert (out.held, out.vel) == (True, (0.0, 0.0, 0.0))
+    assert out.violations == ("speed capped", "separation: 2.0 m, minimum 2.0 m")
+
+
+def test_a_diagonal_approach_slides_past_keeping_the_rest_of_the_velocity() -> None:
+    """Only the approach beyond the allowance is taken away, along the line to the
+    neighbour: 4 m/s north past a neighbour north-east keeps the closing speed at the
+    allowance and gains a westward component."""
+    peer: Vec3 = (3.0, 3.0, -5.0)
+    out = GATE.gate(SetVelocity((4.0, 0.0, 0.0)), HOME, [peer])
+    gap = math.dist(HOME, peer)
+    u = ((peer[0] - HOME[0]) / gap, (peer[1] - HOME[1]) / gap, 0.0)
+    allowed = (gap - CFG.min_separation_m) / 2  # metres closer within one horizon
+    excess = (4.0 * u[0]) * H - allowed
+    want = (4.0 - excess / H * u[0], -excess / H * u[1], 0.0)
+    assert not out.held
+    assert out.vel == pytest.approx(want, abs=1e-12)
+    assert out.vel[1] < 0  # it slid west, it did not just slow down
+    assert out.violations == ("slid past for separation (4.2 m, minimum 2.0 m)",)
+
+
 def test_a_body_that_runs_no_gate_may_be_approached_to_the_minimum() -> None:
     """An evader the world flies keeps no half of the gap: the pursuer may use all of it."""
     evader: Vec3 = (6.0, 0.0, -5.0)
