@@ -130,8 +130,11 @@ async def test_the_reward_of_a_round_arrives_before_the_next_round(
     nxt = asyncio.create_task(link.next_round())
     await asyncio.sleep(0)  # it waits for a perception now
     world.perceive(1)  # the next perception overtakes the reward...
-    world.perceive(2)  # (a sentinel: queued once round 1's perception has been taken)
-    assert await eventually(lambda: link._next is not None and link._next.round == 2)
+    # Taken by the waiting round (nothing pending any more), which now waits for round 0's
+    # reward. (No second perception here: a newer one would supersede round 1's if it came
+    # before the round took it.)
+    assert await eventually(lambda: link._taken == (0, 1) and link._next is None)
+    await asyncio.sleep(0)
     assert not nxt.done()  # ...but the round waits for round 0's reward
     world.reward(0, 2.5, done=False)
     tick = await asyncio.wait_for(nxt, 3.0)
