@@ -124,6 +124,7 @@ async def test_a_partition_of_two_uavs_heals_and_they_rejoin(lab: NetLab, tmp_pa
         "rounds_while_cut": len(during), "rounds": len(run.rounds),
         "stalled_rounds_after_detection": len(stalled),
         "stale_commands_refused": run.runner.stats.rejected_commands,
+        "refused_by_cause": dict(run.runner.refusals()),
         "world_deadline_misses": run.runner.stats.deadline_misses,
         "records_lost": len(lost),
     }))  # fmt: skip
