@@ -41,6 +41,7 @@ from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig, parse_config
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.json_out import write_json_file
+from aeroweaver_edge.llm.embedded import default_threads as embedded_threads
 from aeroweaver_edge.tasks import TASK_NAMES
 
 RESULT_VERSION = 1
@@ -218,6 +219,8 @@ async def run_cell(
             "load_after": _load(),
             "trace": str(trace.relative_to(out)),
             "trace_check": check_against_summary(episodes, summary),
+            # the embedded server's llama.cpp threads: speed only, not the answers' source
+            "llm_threads": embedded_threads() if key["llm"] == "embedded" else None,
             "complete": True,
         },
         "episodes": episodes,
@@ -254,7 +257,7 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
         todo = [
             c for c in cells if load_done(c.json_path(out), key, CONDITIONS[c.condition]) is None
         ]
-        session = {
+        session: dict[str, Any] = {
             "command": "aeroweaver bench run " + " ".join(shlex.quote(a) for a in args.argv),
             "started": datetime.now(UTC).isoformat(timespec="seconds"),
             "load_start": _load(),
@@ -265,6 +268,7 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
             },
             "llm": source,
             "model": llm.model,
+            "llm_threads": embedded_threads() if source == "embedded" else None,
             "llm_deadline_s": llm.deadline_s,
             "cells_planned": len(cells),
             "cells_skipped": len(cells) - len(todo),

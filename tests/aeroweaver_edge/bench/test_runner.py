@@ -53,6 +53,7 @@ def test_quick_run_writes_cells_tables_and_resumes(
         data = json.loads((out / "runs" / "coverage" / c / "seed1.json").read_text())
         assert data["bench"]["complete"]
         assert data["bench"]["trace_check"] == []
+        assert data["bench"]["llm_threads"] is None  # the fake provider: no embedded server
         assert data["bench"]["config"]["rounds"] == 2
         assert (out / data["bench"]["trace"]).is_file()
         assert [e["rounds"] for e in data["episodes"]] == [2]
@@ -66,6 +67,7 @@ def test_quick_run_writes_cells_tables_and_resumes(
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["sessions"][0]["cells_run"] == 3
     assert manifest["sessions"][0]["load_start"]
+    assert manifest["sessions"][0]["llm_threads"] is None
 
     # resume: nothing to run; a damaged cell is run again, the others are kept
     cell = out / "runs" / "coverage" / "centralized" / "seed1.json"
