@@ -59,11 +59,12 @@ async def open_central(
         mesh = await Mesh.open(mesh_cfg, node_id=CENTRAL_NODE)
         stack.push_async_callback(mesh.aclose)
         headers = await asyncio.to_thread(boot_headers, mesh_cfg, CENTRAL_NODE)
+        docs = await asyncio.to_thread(skill_doc_renderer)  # reads the skill packages
         node = CentralNode(
             mesh,
             swarm,
             policy,
-            skill_doc_renderer(),
+            docs,
             gather_s=gather_s,
             on_round=on_round,
             headers=headers,

@@ -30,7 +30,8 @@ from typing import Any
 from aeroweaver_edge.orchestration.swarm import percentiles
 
 
-def _running(pid: int) -> bool:
+def running(pid: int) -> bool:
+    """Whether ``pid`` is a live process (a zombie is not)."""
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
     except (OSError, IndexError):
@@ -38,7 +39,8 @@ def _running(pid: int) -> bool:
     return state not in ("Z", "X")
 
 
-def _children(pid: int) -> list[int]:
+def children(pid: int) -> list[int]:
+    """Live processes whose parent is ``pid``."""
     out = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
@@ -47,7 +49,7 @@ def _children(pid: int) -> list[int]:
             ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
         except (OSError, IndexError, ValueError):
             continue
-        if ppid == pid and _running(int(entry.name)):
+        if ppid == pid and running(int(entry.name)):
             out.append(int(entry.name))
     return out
 
@@ -93,7 +95,7 @@ def one_kill(bound_s: float) -> dict[str, Any]:
                 break
         else:
             raise RuntimeError(f"the run ended before its first round (exit {proc.wait()})")
-        daemons = _children(proc.pid)
+        daemons = children(proc.pid)
         [run_dir] = [p for p in tmp.iterdir() if p.name.startswith("aeroweaver-")]
         killed = time.monotonic()
         proc.send_signal(signal.SIGKILL)
@@ -105,7 +107,7 @@ def one_kill(bound_s: float) -> dict[str, Any]:
             now = time.monotonic() - killed
             for pid in daemons:
                 _reap(pid, exits)
-            if gone is None and not any(_running(p) for p in daemons):
+            if gone is None and not any(running(p) for p in daemons):
                 gone = now
             if removed is None and not run_dir.exists():
                 removed = now
@@ -129,7 +131,7 @@ def one_kill(bound_s: float) -> dict[str, Any]:
         }
     finally:
         for pid in [proc.pid, *daemons]:
-            if _running(pid):
+            if running(pid):
                 os.kill(pid, signal.SIGKILL)
         proc.wait()
         shutil.rmtree(tmp, ignore_errors=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING, Literal
@@ -72,7 +73,7 @@ async def seed_role_slots(
 
     if llm.base_url is None:
         return 0
-    registry = load_skills()
+    registry = await asyncio.to_thread(load_skills)  # reads every skill package from disk
     groups: dict[tuple[str, str, tuple[str, ...]], tuple[list[dict[str, str]], list[int]]] = {}
     for i, uav in enumerate(uavs):
         a = plan.assignments.get(uav)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from aeroweaver_edge.bench.orphans import running
 from aeroweaver_edge.errors import RunFailed
 from aeroweaver_edge.run_dir import (
     ENV_DIR,
@@ -153,14 +154,6 @@ def wait_gone(pid: int, timeout_s: float) -> bool:
             return True
         time.sleep(0.05)
     return not running(pid)
-
-
-def running(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (OSError, IndexError):
-        return False
-    return state not in ("Z", "X")
 
 
 def test_a_daemon_stopped_during_start_up_still_removes_the_directory(tmp_path: Path) -> None:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from aeroweaver_edge.bench.orphans import children, running
 from aeroweaver_edge.config import AgentConfig, MeshConfig, UavConfig, VehicleConfig
 from aeroweaver_edge.run_dir import LOCK_NAME, OWNER_NAME, sweep_stale
 from tests.helpers.zenoh_net import free_port, unique_namespace
@@ -39,29 +40,6 @@ def cli(*args: str, tmpdir: Path, **kw: object) -> subprocess.Popen[str]:
         env=env,
         **kw,  # type: ignore[call-overload]
     )
-
-
-def running(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except (OSError, IndexError):
-        return False
-    return state not in ("Z", "X")
-
-
-def children(pid: int) -> list[int]:
-    """Live processes whose parent is ``pid``."""
-    out = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-        except (OSError, IndexError, ValueError):
-            continue
-        if ppid == pid and running(int(entry.name)):
-            out.append(int(entry.name))
-    return out
 
 
 def wait_for(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.1) -> bool:
