@@ -23,7 +23,9 @@ async def test_hanging_endpoint_holds_every_uav_inside_the_round_and_opens_the_b
     rounds = 5
     async with FakeProvider(Policy(hang=True)) as fake:
         llm = LLMConfig(
-            base_url=fake.base_url, model="fake-model", deadline_s=0.5, retries=0,
+            # 2 s: long enough for every request to reach the server on a loaded machine
+            # (the exact count below is taken there), short enough for a quick test.
+            base_url=fake.base_url, model="fake-model", deadline_s=2.0, retries=0,
             breaker_failures=2, breaker_reset_s=60.0,
         )  # fmt: skip
         opts = SwarmOptions(uavs=3, seed=2, max_rounds=rounds, selector="llm", beta=0.0, llm=llm)
