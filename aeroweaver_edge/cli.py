@@ -144,6 +144,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         secure=not args.insecure,
         pace_s=args.pace if args.pace is not None else (defaults.ROUND_S if args.console else 0.0),
         approval=args.approval,
+        require_llm_answer=True,  # a run whose every decision would be a hold is refused
     )
     view = None if args.quiet else LiveView()
     if args.console:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import os
 import platform
 import shlex
@@ -39,7 +40,7 @@ from aeroweaver_edge.bench.episodes import check_against_summary, episode_metric
 from aeroweaver_edge.cli_checks import check_api_key_env, check_llm_url, finite, int_in
 from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig, parse_config
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.errors import RunFailed, UserError
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.llm.embedded import default_threads as embedded_threads
 from aeroweaver_edge.tasks import TASK_NAMES
@@ -201,9 +202,11 @@ async def run_cell(
             trace_path=trace,
             memory_dir=Path(mem),
         )
+        opts = dataclasses.replace(opts, require_llm_answer=True)  # holds only: no result
         summary = (await run_swarm(opts)).as_dict()
     wall = time.monotonic() - started
     episodes = episode_metrics(read_trace(trace))
+    unusable = llm_failure_problem(episodes)
     data = {
         "bench": {
             "task": cell.task,
@@ -221,13 +224,37 @@ async def run_cell(
             "trace_check": check_against_summary(episodes, summary),
             # the embedded server's llama.cpp threads: speed only, not the answers' source
             "llm_threads": embedded_threads() if key["llm"] == "embedded" else None,
-            "complete": True,
+            "complete": unusable is None,
+            "unusable": unusable,
         },
         "episodes": episodes,
         "summary": summary,
     }
-    write_json_file(cell.json_path(out), data)
+    write_json_file(cell.json_path(out), data)  # incomplete: kept to read, rerun on resume
+    if unusable is not None:
+        raise CellUnusable(unusable)
     return data
+
+
+class CellUnusable(Exception):
+    """The episode ran but its decisions mostly failed at the LLM: not a result."""
+
+
+MAX_LLM_FAILURE_SHARE = 0.25
+"""Above this share of decisions held for ``llm_failure`` a cell measures the endpoint's
+outage, not the method: it is kept for reading but not counted, and a resume reruns it.
+(The embedded run's worst finished cell had 3 of 72.)"""
+
+
+def llm_failure_problem(episodes: Sequence[dict[str, Any]]) -> str | None:
+    decisions = sum(int(e.get("decisions", 0)) for e in episodes)
+    failed = sum(int(e.get("holds_by_cause", {}).get("llm_failure", 0)) for e in episodes)
+    if decisions and failed / decisions > MAX_LLM_FAILURE_SHARE:
+        return (
+            f"{failed} of {decisions} decisions held because the LLM call failed "
+            f"(over {MAX_LLM_FAILURE_SHARE:.0%}): the endpoint was failing, not the method"
+        )
+    return None
 
 
 def _outcome(data: dict[str, Any]) -> str:
@@ -257,6 +284,8 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
         todo = [
             c for c in cells if load_done(c.json_path(out), key, CONDITIONS[c.condition]) is None
         ]
+        if source != "embedded" and any(CONDITIONS[c.condition].selector == "llm" for c in todo):
+            await preflight(llm)  # before any cell: hours of holds are no benchmark
         session: dict[str, Any] = {
             "command": "aeroweaver bench run " + " ".join(shlex.quote(a) for a in args.argv),
             "started": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -281,6 +310,7 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
             flush=True,
         )
         ran = 0
+        unusable_in_a_row = 0
         try:
             for i, cell in enumerate(todo):
                 t0 = time.monotonic()
@@ -288,15 +318,23 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
                     data = await run_cell(cell, args, llm, key)
                     outcome = _outcome(data)
                     ran += 1
-                except (asyncio.CancelledError, KeyboardInterrupt):
-                    raise
+                    unusable_in_a_row = 0
+                except (asyncio.CancelledError, KeyboardInterrupt, UserError):
+                    raise  # a user error (e.g. the endpoint stopped answering) stops the run
                 except Exception as exc:  # one cell failing must not lose the others
                     from aeroweaver_edge.cli_errors import one_line
 
                     outcome = f"FAILED: {one_line(f'{type(exc).__name__}: {exc}')[:300]}"
                     failures.append(f"{cell}: {outcome}")
+                    unusable = isinstance(exc, CellUnusable)
+                    unusable_in_a_row = unusable_in_a_row + 1 if unusable else 0
                 line = progress.line(cell, time.monotonic() - t0, outcome, todo[i + 1 :])
                 print(line, file=sys.stderr, flush=True)
+                if unusable_in_a_row >= 2:
+                    raise RunFailed(
+                        f"the LLM failed most decisions of {unusable_in_a_row} cells in a row "
+                        f"(last: {cell}); fix the endpoint, then rerun the same command to resume"
+                    )
         finally:
             session.update(
                 finished=datetime.now(UTC).isoformat(timespec="seconds"),
@@ -318,6 +356,16 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
             print(f"  {f}", file=sys.stderr)
         return 1
     return 0
+
+
+async def preflight(llm: LLMConfig) -> None:
+    """The endpoint's start-up probe; a ``UserError`` naming the cause if it does not answer."""
+    from aeroweaver_edge.orchestration.llm import probe
+
+    verdict = await probe(llm)
+    if not verdict.verdict:
+        raise UserError(verdict.unanswered_line())
+    print(f"bench: {verdict.line()}", file=sys.stderr, flush=True)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -403,11 +451,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.rounds = args.rounds or 24
     if args.llm:
         check_llm_url(args.llm)
+    elif args.model or args.api_key_env:
+        flag = "--model" if args.model else "--api-key-env"
+        raise UserError(
+            f"{flag} is for an endpoint given with --llm URL",
+            "add --llm URL, or drop it to use the embedded SmolLM2-135M",
+        )
     check_api_key_env(args.api_key_env)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {out} is not a directory", "give --out a directory")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(
+            f"--out {out} cannot be created ({exc.strerror or exc})",
+            "give --out a writable directory",
+        ) from None
     if not os.access(out, os.W_OK):
         raise UserError(f"--out {out} is not writable", "give --out a writable directory")
     if args.report_only:

@@ -76,6 +76,7 @@ class Policy:
     finish_reason: str | None = None  # default: "length" when max_tokens <= 1 else "stop"
     status: int | None = None  # answer chat requests with this HTTP status
     status_times: int | None = None  # ... only for the first N chat requests (None: always)
+    status_after: int = 0  # ... only after answering the first N (an endpoint that dies)
     retry_after: float | None = None  # Retry-After header on error statuses
     hang: bool = False  # read the request, never answer
     drip_s: float = 0.0  # send the body a few bytes at a time with this pause
@@ -414,8 +415,10 @@ class FakeProvider:
         self._last_cached = None
         if not isinstance(body, dict) or not isinstance(body.get("messages"), list):
             return _error(400, "messages: field required")
-        if policy.status is not None and (
-            policy.status_times is None or self._errors_served < policy.status_times
+        if (
+            policy.status is not None
+            and self.chat_calls > policy.status_after
+            and (policy.status_times is None or self._errors_served < policy.status_times)
         ):
             self._errors_served += 1
             extra = {} if policy.retry_after is None else {"Retry-After": f"{policy.retry_after:g}"}

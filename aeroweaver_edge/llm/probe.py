@@ -160,6 +160,17 @@ class ProbeResult:
         """Alias of ``line()`` (the name ``app.py`` uses)."""
         return self.line()
 
+    def unanswered_line(self) -> str:
+        """One line for a command that refuses to start without an answering endpoint (a
+        simulation or benchmark whose every decision would be a hold)."""
+        where = f"{self.model} @ {self.endpoint}" if self.endpoint else self.model or "endpoint"
+        detail = f": {self.detail}" if self.detail else ""
+        fix = _FIX.get(self.kind, "check the endpoint")
+        return (
+            f"the LLM endpoint ({where}) did not answer the start-up probe "
+            f"[{self.kind}]{detail}; {fix}"
+        )
+
 
 def classify_response(
     raw: dict[str, Any],

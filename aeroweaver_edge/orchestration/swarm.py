@@ -37,7 +37,7 @@ from aeroweaver_edge.config import (
     SimConfig,
     UavConfig,
 )
-from aeroweaver_edge.errors import RunFailed
+from aeroweaver_edge.errors import RunFailed, UserError
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.barrier import DEFAULT_TIMEOUT_S as BARRIER_TIMEOUT_S
@@ -101,6 +101,10 @@ class SwarmOptions:
     finalised_only: bool = False  # AgentConfig.finalised_only (retrieval of ended episodes)
     pace_s: float = 0.0  # wall-clock floor per round (the console: watchable scripted runs)
     approval: Literal["normal", "strict"] = "normal"  # daemons' [approval] level
+    # Refuse to start when the LLM endpoint does not answer the start-up probe (the CLI's
+    # sim and bench: every decision would be a hold). False: start anyway, as a fielded
+    # daemon does, holding until the endpoint answers (the fault tests need that).
+    require_llm_answer: bool = False
 
 
 @dataclass
@@ -390,6 +394,8 @@ async def run_swarm(
         if opts.selector == "llm":
             summary.model = llm.model
             verdict = await probe(llm)
+            if opts.require_llm_answer and not verdict.verdict:
+                raise UserError(verdict.unanswered_line())
             summary.probe, summary.probe_kind = verdict.line(), verdict.kind
             summary.selector = f"llm:{llm.model}"
             if opts.baseline != "none":

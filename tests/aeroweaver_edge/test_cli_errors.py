@@ -93,6 +93,14 @@ def cases(tmp: Path, busy_port: int) -> dict[str, Case]:
             ("sim", "--llm", "http://127.0.0.1:9/v1", "--api-key-env", "AW_TEST_UNSET_KEY"),
             ("AW_TEST_UNSET_KEY", "export"),
         ),
+        "unreachable endpoint": Case(
+            ("sim", "--llm", "http://127.0.0.1:9/v1", "--model", "m"),
+            ("did not answer the start-up probe [unreachable]", "127.0.0.1:9"),
+        ),
+        "bench unreachable endpoint": Case(
+            ("bench", "run", "--llm", "http://127.0.0.1:9/v1", "--model", "m"),
+            ("did not answer the start-up probe [unreachable]", "127.0.0.1:9"),
+        ),
         "probe unset api key variable": Case(
             ("probe", "--llm", "http://127.0.0.1:9/v1", "--api-key-env", "AW_TEST_UNSET_KEY"),
             ("AW_TEST_UNSET_KEY",),

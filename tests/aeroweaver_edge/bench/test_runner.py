@@ -133,3 +133,56 @@ def test_tables_from_episode_figures() -> None:
     assert "| coverage | -12.00 ± 2.83 (n=2) | -20.00 (n=1) | -29.08 (n=1) |" in md
     assert "| coverage | 0.20 | – |" in md  # tokens 200 / 1000; no centralized cell
     assert "| coverage | 0.000 |" in md  # Q = 1 + (-29.077 + 12) / 17.077 (the paper's K_t)
+
+
+def test_an_endpoint_that_does_not_answer_is_refused_before_any_cell(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bench"
+    args = ["bench", "run", "--tasks", "coverage", "--conditions", "aeroweaver", "--seeds", "1"]
+    status = main([*args, "--llm", "http://127.0.0.1:9/v1", "--model", "m", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1
+    assert "did not answer the start-up probe [unreachable]" in err
+    assert not list(out.rglob("*.json"))  # no cell, no session: nothing to mistake for a result
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--model", "m"], "--model is for an endpoint given with --llm URL"),
+        (["--out", "/proc/aw-no-such-dir"], "cannot be created"),
+    ],
+)
+def test_bench_flag_mistakes_are_one_line(
+    argv: list[str], says: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["bench", "run", "--quick", *argv]) == 2
+    err = capsys.readouterr().err
+    assert says in err
+    assert err.count("\n") == 1
+
+
+async def test_a_cell_whose_decisions_failed_at_the_llm_is_not_a_result(tmp_path: Path) -> None:
+    """The endpoint answers the probes, then fails every call: the cell is kept to read but
+    not complete, so the table never counts it and a resume runs it again."""
+    import argparse
+
+    from aeroweaver_edge.bench.runner import CellUnusable, config_key, load_done, run_cell
+    from aeroweaver_edge.bench.conditions import CONDITIONS
+    from aeroweaver_edge.config import LLMConfig
+    from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
+
+    out = tmp_path / "bench"
+    args = argparse.Namespace(out=str(out), episodes=1, rounds=3, deadline=None)
+    c = Cell("coverage", "aeroweaver", 1)
+    async with FakeProvider(Policy(status=500, status_after=4)) as fake:  # run's + 3 probes
+        llm = LLMConfig(base_url=fake.base_url, model=fake.model, deadline_s=2.0, retries=0)
+        key = config_key(3, 1, llm, "endpoint")
+        with pytest.raises(CellUnusable, match=r"9 of 9 decisions held because the LLM call"):
+            await run_cell(c, args, llm, key)
+    data = json.loads(c.json_path(out).read_text())
+    assert data["bench"]["complete"] is False
+    assert "the endpoint was failing" in data["bench"]["unusable"]
+    assert load_done(c.json_path(out), key, CONDITIONS["aeroweaver"]) is None
