@@ -645,19 +645,9 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument(
         "what",
-        choices=[
-            "run",
-            "memory",
-            "memory-kill",
-            "kill-restart",
-            "scale",
-            "reference",
-            "mavlink",
-            "llm_latency",
-            "security",
-            "fuzz",
-        ],
-        help="run: the benchmark (tasks x conditions x seeds; 'aeroweaver bench run --help')",
+        choices=BENCH_WHATS,
+        help="run: the benchmark (tasks x conditions x seeds; 'aeroweaver bench run --help'); "
+        "with no name and any runner flags, 'aeroweaver bench [--quick] ...' is 'bench run'",
     )
     b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
     b.add_argument(
@@ -700,8 +690,23 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+BENCH_WHATS = [
+    "run",
+    "memory",
+    "memory-kill",
+    "kill-restart",
+    "scale",
+    "reference",
+    "mavlink",
+    "llm_latency",
+    "security",
+    "fuzz",
+]
+
+
 def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
-    """``[-v] bench run ...``: (verbose, the runner's own arguments), else None. The
+    """``[-v] bench run ...``, or ``bench`` naming no other benchmark (``bench --quick``,
+    ``bench --tasks coverage``): (verbose, the runner's own arguments), else None. The
     benchmark runner has its own parser (its --seeds, --tasks, --rounds mean other things)."""
     args = list(argv)
     verbose = False
@@ -709,6 +714,10 @@ def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
         verbose, args = True, args[1:]
     if args[:2] == ["bench", "run"]:
         return verbose, args[2:]
+    rest = args[1:]
+    help_only = bool(rest) and all(a in ("-h", "--help") for a in rest)
+    if args[:1] == ["bench"] and not help_only and not set(rest) & set(BENCH_WHATS):
+        return verbose, rest
     return None
 
 

@@ -186,3 +186,11 @@ async def test_a_cell_whose_decisions_failed_at_the_llm_is_not_a_result(tmp_path
     assert data["bench"]["complete"] is False
     assert "the endpoint was failing" in data["bench"]["unusable"]
     assert load_done(c.json_path(out), key, CONDITIONS["aeroweaver"]) is None
+
+
+def test_bench_without_a_benchmark_name_is_the_runner(tmp_path: Path) -> None:
+    """The issue's form, ``aeroweaver bench --quick ...``, is ``aeroweaver bench run``."""
+    out = tmp_path / "bench"
+    argv = ["bench", "--quick", "--tasks", "coverage", "--conditions", "scripted"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert json.loads((out / "runs" / "coverage" / "scripted" / "seed1.json").read_text())
