@@ -138,7 +138,29 @@ def _zerror_text(exc: Exception) -> str:
     return text.split(" at /", 1)[0].strip().rstrip('"')
 
 
+ZENOH_RUNTIME_ENV = "ZENOH_RUNTIME"
+RX_WORKERS = 8
+"""Zenoh RX worker threads per process (zenoh's own default is 2).
+
+Zenoh 1.10 sets SO_LINGER = 10 s on its TCP and TLS links and, when a link's lease expires,
+closes it from a task on the RX runtime. A peer that went silent (a radio partition: no FIN,
+no RST) always leaves unacknowledged bytes queued (at least keep-alives), so that close(2)
+blocks its RX worker thread in the kernel for up to 10 s (zenoh #1101, #2718). With the
+default two workers, two peers going silent together block both, and the session (for a
+router: every client's traffic) hears nothing for 10 s. Measured in
+``tests/aeroweaver_edge/orchestration/test_netns_faults.py`` (docs/reliability.md). With
+``RX_WORKERS`` workers, up to ``RX_WORKERS - 1`` links dying silently within 10 s leave a
+worker for the live ones. An operator's own ``ZENOH_RUNTIME`` is left as it is."""
+
 _log_initialised = False
+
+
+def _init_zenoh_runtime() -> None:
+    """Ask for ``RX_WORKERS`` RX threads unless the operator configured the runtime. Zenoh
+    reads the variable when its runtime first starts (the process's first session), and
+    spawned daemons inherit it."""
+    if ZENOH_RUNTIME_ENV not in os.environ:
+        os.environ[ZENOH_RUNTIME_ENV] = f"(rx: (worker_threads: {RX_WORKERS}))"
 
 
 def _init_zenoh_log() -> None:
@@ -321,6 +343,7 @@ class Mesh:
     async def open(cls, cfg: MeshConfig, *, node_id: str, codec: Codec | None = None) -> Mesh:
         """Open a session in a worker thread (zenoh.open blocks up to scouting.delay)."""
         _init_zenoh_log()
+        _init_zenoh_runtime()
         if cfg.security is not None and cfg.security.identity != node_id:
             raise ConfigError(
                 f"mesh.security.identity is {cfg.security.identity!r} but this node is {node_id!r}"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -13,7 +14,7 @@ import pytest
 import zenoh
 
 from aeroweaver_edge.config import ConfigError, MeshConfig
-from aeroweaver_edge.mesh import Mesh, MeshClosed, build_zenoh_config
+from aeroweaver_edge.mesh import RX_WORKERS, Mesh, MeshClosed, build_zenoh_config
 from aeroweaver_edge.wire import HeaderFactory, Keys, StateBeacon
 from tests.helpers.zenoh_net import ZenohNet, eventually
 
@@ -211,3 +212,46 @@ async def test_session_is_closed_by_aclose(zenoh_net: ZenohNet) -> None:
     assert isinstance(a.session, zenoh.Session)
     await a.aclose()
     assert a.session.is_closed()
+
+
+RX_SCRIPT = """
+import asyncio, glob, os
+from aeroweaver_edge.config import MeshConfig
+from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.orchestration.network import free_port
+
+async def main():
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    router = await Mesh.open(MeshConfig(mode="router", listen=[ep], namespace="rx"), node_id="r")
+    client = await Mesh.open(
+        MeshConfig(mode="client", listen=[], connect=[ep], namespace="rx"), node_id="c"
+    )
+    names = [open(t + "/comm").read().strip() for t in glob.glob("/proc/self/task/*")]
+    print(sum(n.startswith("rx-") for n in names), os.environ["ZENOH_RUNTIME"])
+    await client.aclose()
+    await router.aclose()
+
+asyncio.run(main())
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts threads in /proc")
+@pytest.mark.parametrize("preset", [None, "(rx: (worker_threads: 3))"])
+def test_the_first_session_gets_spare_rx_workers(preset: str | None) -> None:
+    """A silently dead link blocks one zenoh RX worker for up to 10 s when it is closed
+    (SO_LINGER); with zenoh's two, two dead links made a router deaf for 10 s. The process's
+    first Mesh asks for RX_WORKERS of them, unless the operator set ZENOH_RUNTIME."""
+    env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+    if preset is not None:
+        env["ZENOH_RUNTIME"] = preset
+    out = subprocess.run(
+        [sys.executable, "-c", RX_SCRIPT], capture_output=True, text=True, timeout=30,
+        check=True, env=env,
+    )  # fmt: skip
+    count, runtime = out.stdout.split(maxsplit=1)
+    if preset is None:
+        assert int(count) >= RX_WORKERS > 2
+        assert runtime.strip() == f"(rx: (worker_threads: {RX_WORKERS}))"
+    else:
+        assert 3 <= int(count) < RX_WORKERS
+        assert runtime.strip() == preset
