@@ -113,6 +113,7 @@ class SimLink:
         self.superseded += self._next is not None  # the daemon fell behind
         self._taken, self._next = where, msg
         self._tick_ready.set()
+        self._reward_arrived.set()  # a settle waiting on an older round stops (see settle)
         return None
 
     def _reward_round(self, where: tuple[int, int]) -> bool:
@@ -149,11 +150,14 @@ class SimLink:
             self._tick_ready.set()
         return None
 
-    async def _await_reward(self, key: tuple[int, int], bound_s: float | None = None) -> None:
-        """Lockstep: a round's reward reaches the agent before its next round starts."""
+    async def _await_reward(
+        self, key: tuple[int, int], bound_s: float | None = None, *, until_newer: bool = False
+    ) -> None:
+        """Lockstep: a round's reward reaches the agent before its next round starts.
+        ``until_newer``: stop early once a perception of a later round has arrived."""
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(self._reward_wait_s if bound_s is None else bound_s):
-                while key not in self._reward_seen:
+                while key not in self._reward_seen and not (until_newer and self._taken > key):
                     self._reward_arrived.clear()
                     await self._reward_arrived.wait()
 
@@ -195,8 +199,14 @@ class SimLink:
         so an episode's last reward is absorbed before the world starts the next one. The
         world rewards a round once every command is in or its deadline passed, so a UAV that
         decided early waits up to that deadline: with a fixed 2 s, an LLM swarm's fast UAV
-        missed the episode's last reward and the barrier waited its full bound for it."""
-        await self._await_reward((tick.episode, tick.round), tick.deadline_s + self._reward_wait_s)
+        missed the episode's last reward and the barrier waited its full bound for it.
+        A perception of a later round ends the wait: the world has moved on, and the next
+        round waits ``reward_wait_s`` more for this reward. A UAV cut off by a partition lost
+        the reward sent across it; before, it sat here the whole bound after the link healed
+        (12 s at a 10 s deadline) and missed the first round the world sent it."""
+        await self._await_reward(
+            (tick.episode, tick.round), tick.deadline_s + self._reward_wait_s, until_newer=True
+        )
 
     # Perception
     async def sense(self, tick: RoundTick) -> Percept:

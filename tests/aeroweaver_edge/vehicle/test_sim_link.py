@@ -194,3 +194,34 @@ async def test_settle_waits_for_the_reward_up_to_the_round_deadline(
         assert (event.round, event.reward, event.done) == (0, -1.25, True)
     finally:
         await link.aclose()
+
+
+async def test_settle_stops_at_a_later_perception_when_the_reward_was_lost(
+    zenoh_net: ZenohNet,
+) -> None:
+    """A UAV cut off by a partition never gets the reward the world sent across it. Once
+    healed, the world's next perception ends the settle at once (before: the whole deadline
+    + reward_wait_s bound, 7 s here, so the UAV missed the first round it was sent); the
+    round then takes that perception without the lost reward."""
+    world_mesh = await zenoh_net.open("world")
+    uav_mesh = await zenoh_net.open("uav0")
+    link = SimLink(uav_mesh, KEYS, "uav0", HeaderFactory("uav0"), reward_wait_s=2.0)
+    await link.start()
+    try:
+        await asyncio.sleep(0.2)  # let both subscriptions propagate
+        world = World(world_mesh, HeaderFactory("world"), [])
+        world.perceive(0)  # deadline_s 5.0
+        tick = await asyncio.wait_for(link.next_round(), 3.0)
+        assert tick is not None
+        await link.finish(tick, sent=[])
+        settling = asyncio.create_task(link.settle(tick))
+        await asyncio.sleep(0)
+        assert not settling.done()  # waiting for round 0's reward...
+        world.perceive(4)  # ...which was lost: the world is at round 4 now
+        await asyncio.wait_for(settling, 1.5)  # well inside the 7 s bound
+        tick = await asyncio.wait_for(link.next_round(), 3.0)  # <= reward_wait_s for it
+        assert tick is not None
+        assert tick.round == 4
+        assert link.drain() == []
+    finally:
+        await link.aclose()
