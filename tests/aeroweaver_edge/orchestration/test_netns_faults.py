@@ -105,6 +105,14 @@ async def test_a_partition_of_two_uavs_heals_and_they_rejoin(lab: NetLab, tmp_pa
     healed_at = run.rounds.index(during[-1]) + 1
     after = run.rounds[healed_at:]
     assert any(cut_off <= set(log.commands) for log in after)
+    # ...from the first round they are sent: before, a cut-off UAV still waited for the
+    # reward lost in the partition (deadline + 2 s after the cut) and, when the link healed
+    # sooner, missed that round (refused as wrong_round once it answered). No UAV missed
+    # a round deadline at any time.
+    assert run.runner.stats.deadline_misses == 0, [
+        (log.round, log.missed, log.refused) for log in run.rounds if log.missed
+    ]
+    assert run.runner.stats.rejected_commands == 0, dict(run.runner.refusals())
     assert set(run.runner.stats.lost) == cut_off
     assert run.runner.stats.rejoined == dict.fromkeys(sorted(cut_off), 1)
     for uav in cut_off:
