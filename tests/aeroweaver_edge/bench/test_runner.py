@@ -169,8 +169,8 @@ async def test_a_cell_whose_decisions_failed_at_the_llm_is_not_a_result(tmp_path
     not complete, so the table never counts it and a resume runs it again."""
     import argparse
 
-    from aeroweaver_edge.bench.runner import CellUnusable, config_key, load_done, run_cell
     from aeroweaver_edge.bench.conditions import CONDITIONS
+    from aeroweaver_edge.bench.runner import CellUnusable, config_key, load_done, run_cell
     from aeroweaver_edge.config import LLMConfig
     from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
 
