@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.llm.cpus import usable_cpus
 
 log = logging.getLogger(__name__)
 
@@ -59,13 +60,14 @@ THREADS_ENV = "AEROWEAVER_LLM_THREADS"
 
 
 def default_threads() -> int:
-    """llama.cpp threads: ``$AEROWEAVER_LLM_THREADS`` if set, else one per CPU. On a machine
+    """llama.cpp threads: ``$AEROWEAVER_LLM_THREADS`` if set, else one per usable CPU (the
+    affinity mask capped by a container's or service's CPU quota: ``llm.cpus``). On a machine
     shared with other jobs, fewer threads than cores decode far faster: the threads meet at
     a barrier per layer, and each waits for the others to be scheduled (measured on the
     2-core benchmark machine at load 9-16: 9-10 tokens/s with 1 thread, 0.7-0.8 with 2)."""
     text = os.environ.get(THREADS_ENV, "").strip()
     if not text:
-        return os.cpu_count() or 1
+        return usable_cpus()
     try:
         n = int(text)
     except ValueError:
@@ -73,7 +75,7 @@ def default_threads() -> int:
     if n < 1:
         raise UserError(
             f"{THREADS_ENV}={text!r} is not a whole number of threads >= 1",
-            f"set it to e.g. 1, or unset it for one thread per CPU ({os.cpu_count()})",
+            f"set it to e.g. 1, or unset it for one thread per usable CPU ({usable_cpus()})",
         )
     return n
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import importlib.metadata
 import math
-import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -22,6 +21,7 @@ from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.llm import embedded
 from aeroweaver_edge.llm.client import ChatClient
+from aeroweaver_edge.llm.cpus import usable_cpus
 from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable, shared_server
 from aeroweaver_edge.llm.probe import PROBE_LABELS, probe_endpoint
 from aeroweaver_edge.llm.slot_seed import SlotGroup, seed_slots
@@ -31,7 +31,7 @@ from aeroweaver_edge.ports import Candidate, DecisionRequest
 
 def test_threads_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(embedded.THREADS_ENV, raising=False)
-    assert EmbeddedServer().threads == (os.cpu_count() or 1)
+    assert EmbeddedServer().threads == usable_cpus()
     monkeypatch.setenv(embedded.THREADS_ENV, " 1 ")
     assert EmbeddedServer().threads == 1
     assert EmbeddedServer(threads=3).threads == 3  # an explicit count wins
