@@ -40,6 +40,10 @@ def _new(episode: int) -> dict[str, Any]:
         "latency_s": [],
         "central_rounds": 0,
         "central_invalid": 0,
+        # HMAS-2: the UAVs' local reviews of the central plan, and rounds where the central
+        # revision changed the plan for at least one UAV (0 of N: it chose as Centralized)
+        "central_reviews": {"asked": 0, "agreed": 0},
+        "central_revised_rounds": 0,
         "messages": {"sent": 0},
     }
 
@@ -75,6 +79,13 @@ def episode_metrics(lines: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
                     e["tokens"]["central"]["completion"] += int(c.get("completion", 0))
                     if c.get("stage") != "plan":
                         e["central_invalid"] += len(c.get("invalid", {}))
+                reviews = central.get("reviews") or {}
+                if reviews:
+                    e["central_reviews"]["asked"] += len(reviews)
+                    e["central_reviews"]["agreed"] += sum(
+                        bool(r.get("agree")) for r in reviews.values() if isinstance(r, dict)
+                    )
+                    e["central_revised_rounds"] += central.get("proposal") != central.get("final")
         elif kind == "episode_end":
             e = eps.setdefault(int(row["episode"]), _new(int(row["episode"])))
             e["team_return"] = row.get("team_return")

@@ -9,6 +9,7 @@ holds by cause. ``write_report`` writes ``results.csv``, ``table.md`` and the pl
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.hold_reasons import HOLD_CAUSES
 from aeroweaver_edge.json_out import write_json_file
 
@@ -55,6 +57,10 @@ class CellStats:
     cached: int = 0
     model: str | None = None
     mismatches: list[str] = field(default_factory=list)
+    central_rounds: int = 0
+    reviews_asked: int = 0
+    reviews_agreed: int = 0
+    revised_rounds: int = 0
 
     @property
     def n(self) -> int:
@@ -101,6 +107,10 @@ class CellStats:
         self.prompt += other.prompt
         self.cached += other.cached
         self.model = self.model or other.model
+        self.central_rounds += other.central_rounds
+        self.reviews_asked += other.reviews_asked
+        self.reviews_agreed += other.reviews_agreed
+        self.revised_rounds += other.revised_rounds
 
     def figures(self) -> dict[str, Any]:
         """The table's figures as numbers (summary.json)."""
@@ -127,10 +137,16 @@ class CellStats:
                 k: r(v / episodes, 2) for k, v in self.holds.items() if v and episodes
             },
             "model": self.model,
+            "central_rounds": self.central_rounds,
+            "reviews_agreed": self.reviews_agreed,
+            "reviews_asked": self.reviews_asked,
+            "revised_rounds": self.revised_rounds,
         }
 
 
 def load_cells(out: Path) -> list[dict[str, Any]]:
+    """The complete cells. A cell written before a per-episode figure existed gets its
+    episodes recomputed from its trace (the source of every figure) when the trace is there."""
     cells = []
     for path in sorted((out / "runs").glob("*/*/seed*.json")):
         try:
@@ -138,6 +154,11 @@ def load_cells(out: Path) -> list[dict[str, Any]]:
         except (OSError, ValueError):
             continue
         if isinstance(data, dict) and data.get("bench", {}).get("complete"):
+            eps = data.get("episodes") or []
+            trace = out / str(data["bench"].get("trace", ""))
+            if any("central_reviews" not in e for e in eps) and trace.is_file():
+                with contextlib.suppress(OSError, ValueError):
+                    data["episodes"] = episode_metrics(read_trace(trace))
             cells.append(data)
     return cells
 
@@ -167,6 +188,11 @@ def aggregate(cells: Iterable[dict[str, Any]]) -> dict[tuple[str, str], CellStat
             for side in ("uavs", "central"):
                 s.prompt += int(e["tokens"][side]["prompt"])
                 s.cached += int(e["tokens"][side]["prompt_cached"])
+            s.central_rounds += int(e.get("central_rounds", 0))
+            reviews = e.get("central_reviews", {})
+            s.reviews_asked += int(reviews.get("asked", 0))
+            s.reviews_agreed += int(reviews.get("agreed", 0))
+            s.revised_rounds += int(e.get("central_revised_rounds", 0))
     return stats
 
 
@@ -291,6 +317,18 @@ def markdown(
                 f"{_num(s.uncached_per_call, 0)} | "
                 f"{'–' if inv is None else f'{100 * inv:.1f} %'} | {_holds(s)} |"
             )
+    hmas2 = [(t, stats[(t, "hmas2")]) for t in tasks if (t, "hmas2") in stats]
+    if any(s.reviews_asked for _, s in hmas2):
+        out += [
+            "",
+            "### HMAS-2: local reviews and central revisions",
+            "",
+            "| task | episodes | reviews agreeing with the plan | rounds the revision changed |",
+            "|---|---|---|---|",
+        ]
+        for t, s in hmas2:
+            agree = f"{s.reviews_agreed} of {s.reviews_asked}" if s.reviews_asked else "–"
+            out.append(f"| {t} | {s.n} | {agree} | {s.revised_rounds} of {s.central_rounds} |")
     bad = [(k, s.mismatches) for k, s in stats.items() if s.mismatches]
     if bad:
         out += ["", "Trace vs summary mismatches:"]

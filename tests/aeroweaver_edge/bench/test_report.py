@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from aeroweaver_edge.bench.report import aggregate, summary, token_ratios
@@ -54,3 +56,47 @@ def test_summary_per_task_pooled_per_condition_and_ratios() -> None:
         "aeroweaver/centralized": None,
     }
     assert s["token_ratios"]["line_formation"]["aeroweaver/hmas2"] is None
+
+
+def central_round(
+    rnd: int, proposal: dict[str, str], final: dict[str, str], agree: list[bool]
+) -> dict[str, Any]:
+    return {
+        "type": "round",
+        "episode": 0,
+        "round": rnd,
+        "decisions": {},
+        "central": {
+            "calls": [],
+            "proposal": proposal,
+            "final": final,
+            "reviews": {f"uav{i}": {"agree": a, "suggest": "A"} for i, a in enumerate(agree)},
+        },
+    }
+
+
+def test_hmas2_reviews_and_revisions_are_counted_and_tabled() -> None:
+    """How often the UAVs agreed with the central plan and how often the revision changed
+    it: 0 revisions means HMAS-2 chose exactly as its plan (Centralized's kind of call)."""
+    from aeroweaver_edge.bench.episodes import episode_metrics
+    from aeroweaver_edge.bench.report import markdown
+
+    lines = [
+        central_round(0, {"uav0": "A", "uav1": "B"}, {"uav0": "A", "uav1": "B"}, [True, True]),
+        central_round(1, {"uav0": "A", "uav1": "B"}, {"uav0": "C", "uav1": "B"}, [False, True]),
+        central_round(2, {"uav0": "A", "uav1": "A"}, {"uav0": "A", "uav1": "A"}, [False, False]),
+        {"type": "round", "episode": 0, "round": 3, "decisions": {}, "central": {"calls": []}},
+        {"type": "episode_end", "episode": 0, "team_return": -1.0, "reason": "horizon"},
+    ]
+    (ep,) = episode_metrics(lines)
+    assert ep["central_reviews"] == {"asked": 6, "agreed": 3}
+    assert ep["central_revised_rounds"] == 1  # round 1 only; round 3 had no reviews
+    assert ep["central_rounds"] == 4
+    data = cell("coverage", "hmas2", 1, [-1.0], 10)
+    data["episodes"][0].update(
+        central_reviews=ep["central_reviews"],
+        central_revised_rounds=ep["central_revised_rounds"],
+        central_rounds=ep["central_rounds"],
+    )
+    table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
+    assert "| coverage | 1 | 3 of 6 | 1 of 4 |" in table
