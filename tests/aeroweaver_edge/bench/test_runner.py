@@ -194,3 +194,33 @@ def test_bench_without_a_benchmark_name_is_the_runner(tmp_path: Path) -> None:
     argv = ["bench", "--quick", "--tasks", "coverage", "--conditions", "scripted"]
     assert main([*argv, "--out", str(out)]) == 0
     assert json.loads((out / "runs" / "coverage" / "scripted" / "seed1.json").read_text())
+
+
+@pytest.mark.parametrize(
+    ("quirk", "kind"),
+    [
+        ("unauthorized", "auth"),
+        ("wrong_model", "not_found"),
+        ("server_error", "server_error"),
+        ("bad_json", "bad_response"),
+        ("hang", "timeout"),
+    ],
+)
+def test_an_endpoint_that_cannot_answer_is_named_before_any_cell(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], quirk: str, kind: str
+) -> None:
+    from aeroweaver_edge.llm.fake_provider import QUIRKS, FakeProvider
+
+    out = tmp_path / "bench"
+    model = "gpt-nonexistent" if quirk == "wrong_model" else "fake-model"
+    argv = ["bench", "--model", model, "--llm-deadline", "0.5", "--tasks", "coverage"]
+    argv += ["--conditions", "aeroweaver", "centralized", "--seeds", "1", "--out", str(out)]
+    with FakeProvider(QUIRKS[quirk], model="fake-model").in_thread() as fake:
+        status = main([*argv, "--llm", fake.base_url])
+        chat_calls = fake.chat_calls
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1, err
+    assert f"did not answer the start-up probe [{kind}]" in err
+    assert chat_calls <= 4  # the probe (and its retries), never a cell's rounds
+    assert not list(out.rglob("*.json"))
