@@ -41,7 +41,7 @@ from aeroweaver_edge.config import (
     parse_config,
 )
 from aeroweaver_edge.errors import UserError
-from aeroweaver_edge.tasks import TASK_NAMES
+from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
 T = TypeVar("T")
 
@@ -484,6 +484,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "task",
         nargs="?",
+        type=canonical_task,
         choices=TASK_NAMES,
         default=None,
         help="benchmark task (default: coverage, or the mission's)",
@@ -660,7 +661,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="scale, security: swarm sizes (default 3 10 25 50; security: 3 10)",
     )
-    b.add_argument("--task", choices=TASK_NAMES, default="coverage", help="scale, security: task")
+    b.add_argument(
+        "--task",
+        type=canonical_task,
+        choices=TASK_NAMES,
+        default="coverage",
+        help="scale, security: task",
+    )
     b.add_argument(
         "--rounds",
         type=int_in(1),
@@ -669,7 +676,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--seed", type=int, default=1, help="scale: layout seed")
     b.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5], help="reference: seeds")
-    b.add_argument("--tasks", nargs="+", choices=TASK_NAMES, help="reference: tasks (all)")
+    b.add_argument(
+        "--tasks", nargs="+", type=canonical_task, choices=TASK_NAMES, help="reference: tasks (all)"
+    )
     b.add_argument(
         "--in-process", action="store_true", help="scale: daemons in one process (no RSS)"
     )

@@ -32,7 +32,7 @@ from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
-from aeroweaver_edge.tasks import TASK_NAMES
+from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
 
 @dataclass(frozen=True)
@@ -318,7 +318,9 @@ def write_reports(results: list[dict[str, Any]], out: Path, command: str) -> Non
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m aeroweaver_edge.bench.adaptation")
-    p.add_argument("--tasks", nargs="+", choices=TASK_NAMES, default=["coverage"])
+    p.add_argument(
+        "--tasks", nargs="+", type=canonical_task, choices=TASK_NAMES, default=["coverage"]
+    )
     p.add_argument("--episodes", type=int, default=8)
     p.add_argument("--seeds", type=int, nargs="+", default=None, help="seed sequences")
     p.add_argument("--seed", type=int, default=1, help="one seed sequence (if no --seeds)")

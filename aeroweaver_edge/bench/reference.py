@@ -18,7 +18,7 @@ import sys
 from typing import Any
 
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
-from aeroweaver_edge.tasks import TASK_NAMES
+from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
 
 async def one(task: str, seed: int, uavs: int | None) -> dict[str, Any]:
@@ -56,7 +56,9 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="aeroweaver bench reference", description=__doc__)
-    p.add_argument("--tasks", nargs="+", choices=TASK_NAMES, default=list(TASK_NAMES))
+    p.add_argument(
+        "--tasks", nargs="+", type=canonical_task, choices=TASK_NAMES, default=list(TASK_NAMES)
+    )
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
     p.add_argument("--uavs", type=int, default=None, help="default: each task's team size")
     args = p.parse_args(argv)

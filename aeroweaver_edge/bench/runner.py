@@ -43,7 +43,7 @@ from aeroweaver_edge.config import LLMConfig, parse_config
 from aeroweaver_edge.errors import RunFailed, UserError
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.llm.embedded import default_threads as embedded_threads
-from aeroweaver_edge.tasks import TASK_NAMES
+from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
 RESULT_VERSION = 1
 DEFAULT_LLM_DEADLINE_S = 60.0
@@ -377,6 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--tasks",
         nargs="+",
+        type=canonical_task,
         choices=TASK_NAMES,
         default=None,
         metavar="TASK",

@@ -13,6 +13,7 @@ not import the other eight, and nothing here imports numpy or mpe2 up front.
 from __future__ import annotations
 
 import importlib
+import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -31,6 +32,32 @@ TASK_NAMES: tuple[str, ...] = (
     "goal_concealment",
 )
 """CLI and Commander task names, in the paper's order."""
+
+
+MPE_NAMES: dict[str, str] = {
+    "simple_spread": "coverage",
+    "simple_tag": "pursuit_evasion",
+    "simple_speaker_listener": "guided_navigation",
+    "simple_crypto": "private_communication",
+    "simple_formation": "circular_formation",
+    "simple_line": "line_formation",
+    "simple_world_comm": "world_communication",
+    "collect_treasure": "collection_delivery",
+    "simple_adversary": "goal_concealment",
+}
+"""The mpe2 scenario each task follows (its ``SPEC.mpe_module``; a test keeps them equal),
+so a user may name a task the way MPE does."""
+
+
+def canonical_task(text: str) -> str:
+    """``TASK_NAMES`` spelling of a task a user typed: case, ``-`` or spaces for ``_``
+    (``Pursuit-Evasion``) and mpe2 scenario names (``simple_spread_v3``) are accepted; anything
+    else comes back unchanged, for the caller's "unknown task" error to name."""
+    key = re.sub(r"[\s\-]+", "_", text.strip().lower())
+    key = re.sub(r"_v\d+$", "", key) if key.startswith(("simple_", "collect_")) else key
+    if key in TASK_NAMES:
+        return key
+    return MPE_NAMES.get(key, text)
 
 
 class UnknownTask(ValueError):
