@@ -88,7 +88,7 @@ class RunnerStats:
     unknown_tokens: int = 0  # liveliness tokens of ids the world does not fly
     snapshots_dropped: int = 0  # round snapshots over the payload cap (observers miss them)
     lost: dict[str, tuple[int, int]] = field(default_factory=dict)  # uav -> (episode, round) lost
-    rejoined: dict[str, int] = field(default_factory=dict)  # uav -> times it came back
+    rejoined: dict[str, int] = field(default_factory=dict)  # uav -> times it came back after lost
 
 
 class WorldRunner:
@@ -173,6 +173,10 @@ class WorldRunner:
                 self.stats.unknown_tokens += alive  # not flown here: never present, never lost
                 continue
             if alive:
+                if uav not in self.alive and uav in self.stats.lost:
+                    # Back after leaving: counted here, not at a round start, so a daemon that
+                    # restarts inside one round (never seen absent by a round) still counts.
+                    self.stats.rejoined[uav] = self.stats.rejoined.get(uav, 0) + 1
                 self.alive.add(uav)
             elif uav in self.alive:
                 self.alive.discard(uav)
@@ -270,7 +274,6 @@ class WorldRunner:
                     world.mark_absent(uav)
                 elif world.body(uav).absent:  # a restarted daemon is back: it flies again
                     world.mark_present(uav)
-                    self.stats.rejoined[uav] = self.stats.rejoined.get(uav, 0) + 1
             scripted = ep.scripted(await self._hear(rnd, world, expect))
             told: dict[str, list[str]] = {}  # the UAVs each one perceives
             for uav in present:
