@@ -226,8 +226,19 @@ async def main():
     client = await Mesh.open(
         MeshConfig(mode="client", listen=[], connect=[ep], namespace="rx"), node_id="c"
     )
-    names = [open(t + "/comm").read().strip() for t in glob.glob("/proc/self/task/*")]
-    print(sum(n.startswith("rx-") for n in names), os.environ["ZENOH_RUNTIME"])
+    want, count = int(os.environ["EXPECT_RX"]), 0
+    for _ in range(200):  # tokio starts its workers asynchronously: wait, bounded (10 s)
+        names = []
+        for t in glob.glob("/proc/self/task/*"):
+            try:
+                names.append(open(t + "/comm").read().strip())
+            except OSError:
+                pass  # a thread that ended meanwhile
+        count = sum(n.startswith("rx-") for n in names)
+        if count >= want:
+            break
+        await asyncio.sleep(0.05)
+    print(count, os.environ["ZENOH_RUNTIME"])
     await client.aclose()
     await router.aclose()
 
@@ -242,6 +253,7 @@ def test_the_first_session_gets_spare_rx_workers(preset: str | None) -> None:
     (SO_LINGER); with zenoh's two, two dead links made a router deaf for 10 s. The process's
     first Mesh asks for RX_WORKERS of them, unless the operator set ZENOH_RUNTIME."""
     env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+    env["EXPECT_RX"] = str(RX_WORKERS if preset is None else 3)
     if preset is not None:
         env["ZENOH_RUNTIME"] = preset
     out = subprocess.run(
