@@ -83,7 +83,7 @@ def cgroup_cpu_limit(root: Path = CGROUP_ROOT, proc_cgroup: Path = PROC_CGROUP) 
                 if q is not None:
                     quotas.append(q)
         elif "cpu" in controllers.split(","):  # cgroup v1 cpu controller
-            for mount in (root / controllers, root / "cpu", root / "cpu,cpuacct"):
+            for mount in dict.fromkeys((root / controllers, root / "cpu", root / "cpu,cpuacct")):
                 for d in _ancestors(mount, rel):
                     q = _v1_quota(d)
                     if q is not None:

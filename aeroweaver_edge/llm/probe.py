@@ -137,9 +137,14 @@ class ProbeResult:
     def exit_status(self) -> int:
         return EXIT_STATUS[self.kind]
 
+    @property
+    def where(self) -> str:
+        """``model @ endpoint`` as the one-liners name it."""
+        return f"{self.model} @ {self.endpoint}" if self.endpoint else self.model or "endpoint"
+
     def line(self) -> str:
         """A printable one-liner for start-up logs and the run banner."""
-        where = f"{self.model} @ {self.endpoint}" if self.endpoint else self.model or "endpoint"
+        where = self.where
         if self.verdict:
             head = f"LLM probe [{self.kind}] {where}: label mass {self.label_mass:.2f}"
             tail = (
@@ -163,11 +168,10 @@ class ProbeResult:
     def unanswered_line(self) -> str:
         """One line for a command that refuses to start without an answering endpoint (a
         simulation or benchmark whose every decision would be a hold)."""
-        where = f"{self.model} @ {self.endpoint}" if self.endpoint else self.model or "endpoint"
         detail = f": {self.detail}" if self.detail else ""
         fix = _FIX.get(self.kind, "check the endpoint")
         return (
-            f"the LLM endpoint ({where}) did not answer the start-up probe "
+            f"the LLM endpoint ({self.where}) did not answer the start-up probe "
             f"[{self.kind}]{detail}; {fix}"
         )
 
