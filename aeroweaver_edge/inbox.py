@@ -35,9 +35,10 @@ from aeroweaver_edge.wire import InboxMessage, MsgRef, Vec3
 
 log = logging.getLogger(__name__)
 
-# Drops that are the radio model at work (the routing rule), not refusals of bad input:
+# Drops that are the radio model at work (the routing rule) or the end of an episode (a
+# message sent in its last round has no next round to enter), not refusals of bad input:
 # left out of security counts.
-RADIO_DROPS = frozenset({"out_of_range"})
+RADIO_DROPS = frozenset({"out_of_range", "episode_ended"})
 ARRIVED_MEMORY = 4096  # (sender, seq) pairs remembered so an early arrival is not "missing"
 POSITION_MEMORY = 16  # rounds of own positions kept for judging late messages
 
@@ -96,6 +97,7 @@ class Inbox:
         self.role = ""
         self.reach: Reach = within(comm_radius_m)
         self._positions: dict[int, Vec3] = {}
+        self._ended_round: int | None = None  # last round of the previous episode
         self._pending: list[InboxMessage] = []
         self._pending_bytes: dict[tuple[str, int], int] = {}  # (sender, seq) -> encoded size
         self._arrived: dict[tuple[str, int], None] = {}  # insertion-ordered, bounded
@@ -106,7 +108,14 @@ class Inbox:
         self.reach = reach
 
     def note_position(self, round: int, pos: Vec3) -> None:
-        """This UAV's own position in ``round`` (from its beacon)."""
+        """This UAV's own position in ``round`` (from its beacon). Own rounds only go
+        forward, so an earlier one means the round clock restarted (the next episode): the
+        old episode's positions are forgotten. Kept, they would outnumber the new ones and
+        the oldest-round eviction would drop the new episode's first rounds, so every
+        message of those rounds failed the reach rule ("no_own_position")."""
+        if self._positions and round < max(self._positions):
+            self._ended_round = max(self._positions)
+            self._positions.clear()
         self._positions[round] = pos
         while len(self._positions) > POSITION_MEMORY:
             del self._positions[min(self._positions)]
@@ -120,6 +129,12 @@ class Inbox:
         """A round beyond the window this UAV may already hear of (a forged or stale one)."""
         ahead, own = self.limits.future_rounds, self.round
         return ahead is not None and own is not None and round_ > own + ahead
+
+    def _ahead_reason(self, round_: int) -> str:
+        """Why a message too far ahead is dropped: a round of the episode that just ended
+        (sent in its last rounds, it has no next round to enter) or a forged or stale one."""
+        ended = self._ended_round is not None and round_ <= self._ended_round
+        return "episode_ended" if ended else "future_round"
 
     def forget(self, sender: str) -> None:
         """The sender's session ended: its sequence numbers restart, so an old (sender,
@@ -145,7 +160,7 @@ class Inbox:
         Checked before the replay filter, so a refused message does not consume its
         sequence number."""
         if self.too_far_ahead(msg.round):
-            return "future_round"
+            return self._ahead_reason(msg.round)
         lim = self.limits
         if len(self._pending) >= lim.max_pending:
             return "inbox_full"
@@ -190,21 +205,22 @@ class Inbox:
             missing = sorted(want - self._arrived.keys())
             self.stats.missing += len(missing)
             log.info("%s: %d expected message(s) missing: %s", self.uav, len(missing), missing)
+        ready: list[InboxMessage] = []
+        keep: list[InboxMessage] = []
         if max_round is None:
-            ready, keep = self._pending, []
+            ready = self._pending
         else:
             # Kept for a later round only if that round is near: leftovers of an earlier
             # episode (rounds restart at 0) or forged far-future rounds are dropped here.
             ahead = self.limits.future_rounds
             horizon = max_round + 1 + ahead if ahead is not None else None
-            ready = [m for m in self._pending if m.round <= max_round]
-            keep = [
-                m
-                for m in self._pending
-                if m.round > max_round and (horizon is None or m.round <= horizon)
-            ]
-            for _ in range(len(self._pending) - len(ready) - len(keep)):
-                self.reject("future_round", "pending")
+            for m in self._pending:
+                if m.round <= max_round:
+                    ready.append(m)
+                elif horizon is None or m.round <= horizon:
+                    keep.append(m)
+                else:
+                    self.reject(self._ahead_reason(m.round), f"{m.h.sender}#{m.h.seq}")
         self._pending = keep
         kept = {(m.h.sender, m.h.seq) for m in keep}
         self._pending_bytes = {k: v for k, v in self._pending_bytes.items() if k in kept}

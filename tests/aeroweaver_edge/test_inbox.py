@@ -1,0 +1,72 @@
+"""The shared receive side: the reach rule across an episode boundary."""
+
+from __future__ import annotations
+
+import asyncio
+
+from aeroweaver_edge.inbox import POSITION_MEMORY, Inbox
+from aeroweaver_edge.wire import Header, InboxMessage, Vec3
+
+HERE: Vec3 = (0.0, 0.0, 10.0)
+
+
+def msg(seq: int, round_: int) -> InboxMessage:
+    return InboxMessage(
+        h=Header(sender="uav1", epoch=1, seq=seq, stamp=0.0),
+        to="uav0",
+        round=round_,
+        kind="intent",
+        sender_pos=HERE,
+    )
+
+
+def collect(inbox: Inbox, max_round: int) -> list[InboxMessage]:
+    return asyncio.run(inbox.collect(timeout_s=0.0, max_round=max_round))
+
+
+def test_messages_of_the_next_episode_reach_after_a_full_episode() -> None:
+    """Rounds restart at 0 each episode. The first rounds of the second episode used to lose
+    every message: the old episode's positions evicted the new ones."""
+    inbox = Inbox("uav0")
+    seq = 0
+    for episode in range(3):
+        for rnd in range(POSITION_MEMORY + 8):
+            inbox.note_position(rnd, HERE)
+            got = collect(inbox, rnd - 1)
+            if rnd > 0:
+                assert [m.round for m in got] == [rnd - 1], (episode, rnd, inbox.stats.rejected)
+            seq += 1
+            inbox.offer(msg(seq, rnd))
+        collect(inbox, POSITION_MEMORY + 8)  # the last round's message: no next round
+    assert "no_own_position" not in inbox.stats.rejected, inbox.stats.rejected
+
+
+def test_positions_stay_bounded_within_an_episode() -> None:
+    inbox = Inbox("uav0")
+    for rnd in range(3 * POSITION_MEMORY):
+        inbox.note_position(rnd, HERE)
+    assert inbox.round == 3 * POSITION_MEMORY - 1
+    inbox.offer(msg(1, 0))  # far older than the memory: cannot be judged
+    assert collect(inbox, 3 * POSITION_MEMORY) == []
+    assert inbox.stats.rejected["no_own_position"] == 1
+
+
+def test_the_last_rounds_messages_are_an_ended_episode_not_a_refusal() -> None:
+    inbox = Inbox("uav0")
+    for rnd in range(24):
+        inbox.note_position(rnd, HERE)
+    inbox.offer(msg(1, 23))  # sent in the last round: no next round to enter
+    inbox.offer(msg(2, 40))  # beyond the episode's rounds: forged or stale
+    inbox.note_position(0, HERE)  # the next episode
+    assert collect(inbox, -1) == []
+    assert inbox.stats.rejected == {"episode_ended": 1, "future_round": 1}
+
+
+def test_a_late_message_of_the_ended_episode_is_not_a_refusal_either() -> None:
+    inbox = Inbox("uav0")
+    for rnd in range(24):
+        inbox.note_position(rnd, HERE)
+    inbox.note_position(0, HERE)
+    assert inbox.admit(msg(1, 23)) == "episode_ended"
+    assert inbox.admit(msg(2, 40)) == "future_round"
+    assert inbox.admit(msg(3, 1)) is None
