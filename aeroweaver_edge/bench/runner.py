@@ -444,8 +444,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     args.argv = argv
-    args.tasks = args.tasks or list(TASK_NAMES)
-    args.conditions = args.conditions or list(CONDITIONS)
+    # A name given twice (or two spellings of one task) is one cell, one row, one column.
+    args.tasks = list(dict.fromkeys(args.tasks or TASK_NAMES))
+    args.conditions = list(dict.fromkeys(args.conditions or CONDITIONS))
     if args.quick:
         args.seeds = 1 if "--seeds" not in argv else args.seeds
         args.rounds = args.rounds or 2
@@ -460,6 +461,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     check_api_key_env(args.api_key_env)
     out = Path(args.out)
+    if args.report_only:
+        return _report_only(out, args)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {out} is not a directory", "give --out a directory")
     try:
@@ -471,15 +474,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         ) from None
     if not os.access(out, os.W_OK):
         raise UserError(f"--out {out} is not writable", "give --out a writable directory")
-    if args.report_only:
-        from aeroweaver_edge.bench.report import write_report
-
-        write_report(out, tasks=args.tasks, conditions=args.conditions)
-        print(f"report written to {out / 'table.md'}", file=sys.stderr)
-        return 0
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     cells = plan_cells(args.tasks, args.conditions, seeds)
     return asyncio.run(_cancellable(run_all(args, cells)))
+
+
+def _report_only(out: Path, args: argparse.Namespace) -> int:
+    """Rebuild the report from finished cells; a directory without any is a mistyped
+    ``--out``, not an empty benchmark, so it is refused rather than given an empty table."""
+    from aeroweaver_edge.bench.report import load_cells, write_report
+
+    if not out.is_dir():
+        raise UserError(
+            f"--out {out} is not a benchmark directory: nothing to report",
+            "give --out the directory a bench run wrote",
+        )
+    if not load_cells(out):
+        raise UserError(
+            f"--out {out} holds no finished cell (runs/TASK/CONDITION/seedN.json)",
+            "run the benchmark into it first (the same command without --report-only)",
+        )
+    if not os.access(out, os.W_OK):
+        raise UserError(f"--out {out} is not writable", "give --out a writable directory")
+    write_report(out, tasks=args.tasks, conditions=args.conditions)
+    print(f"report written to {out / 'table.md'}", file=sys.stderr)
+    return 0
 
 
 async def _cancellable(coro: Any) -> int:

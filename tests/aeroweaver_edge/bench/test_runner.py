@@ -188,6 +188,37 @@ async def test_a_cell_whose_decisions_failed_at_the_llm_is_not_a_result(tmp_path
     assert load_done(c.json_path(out), key, CONDITIONS["aeroweaver"]) is None
 
 
+def test_report_only_on_a_directory_without_cells_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A mistyped --out used to get an empty table and exit 0 (and was created)."""
+    missing = tmp_path / "no-such-run"
+    assert main(["bench", "run", "--report-only", "--out", str(missing)]) == 2
+    err = capsys.readouterr().err
+    assert "not a benchmark directory" in err
+    assert err.count("\n") == 1
+    assert not missing.exists()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["bench", "run", "--report-only", "--out", str(empty)]) == 2
+    err = capsys.readouterr().err
+    assert "holds no finished cell" in err
+    assert err.count("\n") == 1
+    assert list(empty.iterdir()) == []
+
+
+def test_a_task_or_condition_named_twice_is_one_cell_and_one_row(tmp_path: Path) -> None:
+    out = tmp_path / "bench"
+    argv = ["bench", "--quick", "--tasks", "coverage", "simple_spread_v3", "Coverage"]
+    assert main([*argv, "--conditions", "scripted", "scripted", "--out", str(out)]) == 0
+    rows = (out / "results.csv").read_text().splitlines()
+    assert len(rows) == 1 + 1
+    table = (out / "table.md").read_text()
+    assert table.count("| coverage |") == table.count("### ")  # one row per table
+    assert "| task | Scripted reference |" in table
+    assert main(["bench", "run", "--report-only", "--out", str(out)]) == 0
+
+
 def test_bench_without_a_benchmark_name_is_the_runner(tmp_path: Path) -> None:
     """The issue's form, ``aeroweaver bench --quick ...``, is ``aeroweaver bench run``."""
     out = tmp_path / "bench"
