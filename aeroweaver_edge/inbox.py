@@ -131,9 +131,11 @@ class Inbox:
         return ahead is not None and own is not None and round_ > own + ahead
 
     def _ahead_reason(self, round_: int) -> str:
-        """Why a message too far ahead is dropped: a round of the episode that just ended
-        (sent in its last rounds, it has no next round to enter) or a forged or stale one."""
-        ended = self._ended_round is not None and round_ <= self._ended_round
+        """Why a message too far ahead is dropped: sent in the last two rounds of the episode
+        that just ended (it has no next round to enter), or forged or stale. The window is
+        narrow so that a peer cannot hide stale rounds among the radio drops."""
+        last = self._ended_round
+        ended = last is not None and last - 1 <= round_ <= last
         return "episode_ended" if ended else "future_round"
 
     def forget(self, sender: str) -> None:

@@ -68,5 +68,7 @@ def test_a_late_message_of_the_ended_episode_is_not_a_refusal_either() -> None:
         inbox.note_position(rnd, HERE)
     inbox.note_position(0, HERE)
     assert inbox.admit(msg(1, 23)) == "episode_ended"
-    assert inbox.admit(msg(2, 40)) == "future_round"
-    assert inbox.admit(msg(3, 1)) is None
+    assert inbox.admit(msg(2, 22)) == "episode_ended"
+    assert inbox.admit(msg(3, 40)) == "future_round"
+    assert inbox.admit(msg(4, 10)) == "future_round"  # not the episode's end: a refusal
+    assert inbox.admit(msg(5, 1)) is None
