@@ -113,8 +113,9 @@ class Inbox:
         old episode's positions are forgotten. Kept, they would outnumber the new ones and
         the oldest-round eviction would drop the new episode's first rounds, so every
         message of those rounds failed the reach rule ("no_own_position")."""
-        if self._positions and round < max(self._positions):
-            self._ended_round = max(self._positions)
+        newest = self.round
+        if newest is not None and round < newest:
+            self._ended_round = newest
             self._positions.clear()
         self._positions[round] = pos
         while len(self._positions) > POSITION_MEMORY:
