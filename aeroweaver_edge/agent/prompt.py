@@ -12,7 +12,9 @@ the text goes from the most to the least stable:
    one-line answer cue. Only this part (and the newest history line) is new each round.
 
 Everything per round is compact: small models tokenise every digit separately, so numbers
-carry at most 0.1 (m, m/s) and messages are ``key=value`` lines, not spaced JSON.
+carry at most 0.1 (m, m/s), a message's position is a distance and compass point from the
+reader (like the observation's entities), its other fields ``key=value``, and an option
+with one parameter names its value only (``cover_landmark(L2)``).
 
 Peer messages are *data*. They sit under one ``## Messages`` header, one line per message
 with its provenance, and the ``## Options`` header closes the block; keys are sanitised and
@@ -30,6 +32,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from aeroweaver_edge.agent.describe import bearing, metres5
 from aeroweaver_edge.observation import MissionView, Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
 from aeroweaver_edge.wire import InboxMessage
@@ -89,12 +92,36 @@ def _value(value: str | int | float | bool) -> str:
     return _escape(json.dumps(text, ensure_ascii=True))
 
 
-def format_message(msg: InboxMessage, limits: PromptLimits) -> str:
-    """One peer message as one line of data: ``<sender> <kind> r<round>: k=v k=v``."""
-    fields = " ".join(
+def _finite(value: object) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def format_message(
+    msg: InboxMessage, limits: PromptLimits, own: tuple[float, float] | None = None
+) -> str:
+    """One peer message as one line of data: ``<sender> <kind> r<round>: <skill> <target>
+    k=v ... at <d> m <bearing>``.
+
+    The conventional fields go first without their keys (``skill``, ``target_id``) and,
+    when ``own`` (the reader's position) is given, a ``north``/``east`` pair becomes a
+    distance and compass point from the reader, as entities are described: shorter for a
+    model that spends a token per digit, and easier to use than absolute coordinates.
+    """
+    body = dict(msg.body)
+    lead = [_value(v) for k in ("skill", "target_id") if (v := body.pop(k, "")) != ""]
+    where = ""
+    north, east = _finite(body.get("north")), _finite(body.get("east"))
+    if own is not None and north is not None and east is not None:
+        d = math.hypot(north - own[0], east - own[1])
+        where = f"at {metres5(d)} m {bearing(own, (north, east))}"
+        del body["north"], body["east"]
+    keyed = [
         f"{_SAFE_KEY.sub('_', str(k))[: limits.max_id_chars] or '_'}={_value(v)}"
-        for k, v in sorted(msg.body.items())
-    )
+        for k, v in sorted(body.items())
+    ]
+    fields = " ".join(f for f in (*lead, *keyed, where) if f)
     if len(fields) > limits.max_message_chars:
         fields = fields[: limits.max_message_chars] + " …[truncated]"
     sender = _safe_id(msg.h.sender, limits.max_id_chars)
@@ -102,8 +129,19 @@ def format_message(msg: InboxMessage, limits: PromptLimits) -> str:
     return f"{sender} {kind} r{int(msg.round)}: {fields}".rstrip()
 
 
+def option_text(candidate: Candidate) -> str:
+    """An option as the model reads it: a one-parameter skill takes its value positionally
+    (``cover_landmark(L2)``, as the skill document names the parameter); otherwise the full
+    invocation."""
+    if len(candidate.params) == 1:
+        (value,) = candidate.params.values()
+        if isinstance(value, str | int) and not isinstance(value, bool):
+            return f"{candidate.skill}({_value(value)})"
+    return candidate.text
+
+
 def candidate_lines(candidates: Sequence[Candidate]) -> str:
-    return "\n".join(f"{c.label}. {c.text}" for c in candidates)
+    return "\n".join(f"{c.label}. {option_text(c)}" for c in candidates)
 
 
 def static_part(request: DecisionRequest, system_prompt: str = SYSTEM_PROMPT) -> str:
@@ -140,7 +178,8 @@ def round_part(request: DecisionRequest, limits: PromptLimits | None = None) -> 
         parts.append(MESSAGES_HEADER)
         if dropped:
             parts.append(f"({dropped} older messages omitted)")
-        parts += [format_message(m, limits) for m in messages]
+        own = (obs.own.pos[0], obs.own.pos[1])
+        parts += [format_message(m, limits, own) for m in messages]
     parts += [OPTIONS_HEADER, candidate_lines(request.candidates)]
     labels = [c.label for c in request.candidates]
     if labels:

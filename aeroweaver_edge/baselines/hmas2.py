@@ -14,7 +14,7 @@ answered as ``{"agree": bool, "choice": letter}``.
 
 from __future__ import annotations
 
-from aeroweaver_edge.agent.prompt import agent_part, round_part, static_part
+from aeroweaver_edge.agent.prompt import agent_part, option_text, round_part, static_part
 from aeroweaver_edge.baselines.central import CentralIO, CentralRound, RoundAsks, Verdict
 from aeroweaver_edge.baselines.centralized import plan_call
 from aeroweaver_edge.baselines.json_chat import JsonAnswer, JsonMode, json_chat
@@ -78,7 +78,7 @@ class Hmas2Policy:
 def review_messages(request: DecisionRequest, proposed: str | None) -> list[dict[str, str]]:
     """The UAV's own prompt (as its LLM selector would build it), reviewing the proposal."""
     body = agent_part(request) + round_part(request).rsplit("\nAnswer (", 1)[0]
-    tail = review_user_tail(proposed, [f"{c.label}. {c.text}" for c in request.candidates])
+    tail = review_user_tail(proposed, [f"{c.label}. {option_text(c)}" for c in request.candidates])
     return [
         {"role": "system", "content": static_part(request, REVIEW_SYSTEM)},
         {"role": "user", "content": f"{body}\n{tail}"},

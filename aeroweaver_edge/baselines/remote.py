@@ -20,7 +20,7 @@ import asyncio
 import logging
 from typing import Any
 
-from aeroweaver_edge.agent.prompt import PromptLimits, format_message
+from aeroweaver_edge.agent.prompt import PromptLimits, format_message, option_text
 from aeroweaver_edge.baselines.hmas2 import local_review
 from aeroweaver_edge.baselines.json_chat import JsonMode
 from aeroweaver_edge.lifecycle import cancel_all
@@ -109,6 +109,7 @@ class RemoteSelector:
         obs = request.observation
         limits = PromptLimits()
         messages = list(obs.messages)[-limits.max_messages :]
+        own = (obs.own.pos[0], obs.own.pos[1])
         return CentralAsk(
             h=self.headers.next(),
             uav=self.uav,
@@ -118,8 +119,8 @@ class RemoteSelector:
             role=request.role,
             local_goal=request.local_goal,
             observation=request.observation_text,
-            messages=[format_message(m, limits) for m in messages],
-            options=[f"{c.label}. {c.text}" for c in request.candidates],
+            messages=[format_message(m, limits, own) for m in messages],
+            options=[f"{c.label}. {option_text(c)}" for c in request.candidates],
         )
 
     async def score(self, request: DecisionRequest) -> LabelScores:

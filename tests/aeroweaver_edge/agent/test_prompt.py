@@ -13,6 +13,7 @@ from aeroweaver_edge.agent.prompt import (
     PromptLimits,
     build_messages,
     compact_number,
+    option_text,
 )
 from aeroweaver_edge.observation import Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
@@ -120,7 +121,7 @@ def test_round_part_comes_last_with_observation_options_and_answer_cue() -> None
     assert text.startswith("You are UAV uav1.\n" + HISTORY_HEADER + "\nr3 explore_local()")
     assert text.index(HISTORY_HEADER) < text.index("## Round 4") < text.index(OPTIONS_HEADER)
     assert "landmark L1: 20 m N" in text
-    assert "A. cover_landmark(target_id=L1)\nB. cover_landmark(target_id=L2)" in text
+    assert "A. cover_landmark(L1)\nB. cover_landmark(L2)\nC. explore_local()" in text
     assert text.endswith("Answer (A-D):")
 
 
@@ -136,11 +137,36 @@ def test_numbers_in_the_prompt_carry_at_most_one_decimal() -> None:
         "uav2", {"north": 34.13935298863066, "east": -12.048291698496378, "n": 7, "z": 0.04}
     )
     text = build_messages(request(messages=(msg,)))[-1]["content"]
-    assert "east=-12 n=7 north=34.1 z=0" in text
+    assert "uav2 intent r2: n=7 z=0 at 35 m N" in text  # the position seen from the reader
     assert not re.search(r"\d\.\d{2}", text)
     assert [compact_number(x) for x in (2.0, -0.04, 1.25, 7.96, float("nan"))] == [
         "2", "0", "1.2", "8", "null"
     ]  # fmt: skip
+
+
+def test_a_message_leads_with_skill_and_target_and_places_its_position_from_the_reader() -> None:
+    msgs = (
+        peer_message("uav2", {"skill": "cover_landmark", "target_id": "L2", "north": 30.0,
+                              "east": 42.0, "eta": 3}),
+        peer_message("uav3", {"skill": "explore_local", "target_id": "", "north": -10.0,
+                              "east": 0.0}),
+        peer_message("uav4", {"north": "12", "east": 5.0}),  # not a number: kept as data
+    )  # fmt: skip
+    text = build_messages(request(messages=msgs, pos=(30.0, 2.0)))[-1]["content"]
+    assert "uav2 intent r2: cover_landmark L2 eta=3 at 40 m E\n" in text
+    assert "uav3 intent r2: explore_local at 40 m S\n" in text  # empty target left out
+    assert "uav4 intent r2: east=5 north=12\n" in text
+
+
+def test_an_option_names_a_single_parameter_value_only() -> None:
+    two = Candidate("A", "go_to", {"north": 1.5, "east": 2}, "go_to(north=1.5, east=2)")
+    flag = Candidate("B", "orbit", {"clockwise": True}, "orbit(clockwise=True)")
+    odd = Candidate("C", "follow_peer", {"target_id": "a b\n## x"}, "follow_peer(...)")
+    assert [option_text(c) for c in (*CANDIDATES[:3], two, flag)] == [
+        "cover_landmark(L1)", "cover_landmark(L2)", "explore_local()",
+        "go_to(north=1.5, east=2)", "orbit(clockwise=True)",
+    ]  # fmt: skip
+    assert option_text(odd) == 'follow_peer("a b\\n## x")'  # quoted, cannot break its line
 
 
 # ------------------------------------------------------------------ messages as data
