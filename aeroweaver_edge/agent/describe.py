@@ -27,6 +27,20 @@ def metres5(x: float) -> int:
     return int(5 * round(x / 5))
 
 
+MAX_PLACE_M = 100_000.0
+"""A peer-reported position farther out than this (on either axis) is not a place: no arena
+is that large, and a hostile ``1.7e308`` would overflow the distance."""
+
+
+def place(own: Vec3 | tuple[float, float], north: float, east: float) -> str | None:
+    """``"<d> m <bearing>"`` from ``own`` to a reported (north, east), or ``None`` when the
+    position is not finite or lies beyond ``MAX_PLACE_M`` (then it is just two numbers)."""
+    if not (abs(north) <= MAX_PLACE_M and abs(east) <= MAX_PLACE_M):  # also rejects NaN
+        return None
+    d = math.hypot(north - own[0], east - own[1])
+    return f"{metres5(d)} m {bearing(own, (north, east))}"
+
+
 def _entity_line(e: Entity, pos: Vec3) -> str:
     d = horizontal_distance(pos, e.pos)
     if e.kind == "uav":  # the id says it is a UAV; the role says what it does

@@ -32,7 +32,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from aeroweaver_edge.agent.describe import bearing, metres5
+from aeroweaver_edge.agent.describe import place
 from aeroweaver_edge.observation import MissionView, Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
 from aeroweaver_edge.wire import InboxMessage
@@ -70,9 +70,12 @@ def _escape(text: str) -> str:
 
 
 def compact_number(value: float) -> str:
-    """A number with at most one decimal, without a trailing ``.0`` (``-12.04`` -> ``-12``)."""
+    """A number with at most one decimal, without a trailing ``.0`` (``-12.04`` -> ``-12``);
+    beyond a billion, three significant digits (``1.7e+308``)."""
     if not math.isfinite(value):
         return "null"
+    if abs(value) >= 1e9:  # no measurement here is that large; its digits would only cost tokens
+        return f"{value:.3g}"
     rounded = round(value, 1)
     if rounded == int(rounded):
         return str(int(rounded))
@@ -113,9 +116,9 @@ def format_message(
     lead = [_value(v) for k in ("skill", "target_id") if (v := body.pop(k, "")) != ""]
     where = ""
     north, east = _finite(body.get("north")), _finite(body.get("east"))
-    if own is not None and north is not None and east is not None:
-        d = math.hypot(north - own[0], east - own[1])
-        where = f"at {metres5(d)} m {bearing(own, (north, east))}"
+    seen = None if own is None or north is None or east is None else place(own, north, east)
+    if seen is not None:
+        where = f"at {seen}"
         del body["north"], body["east"]
     keyed = [
         f"{_SAFE_KEY.sub('_', str(k))[: limits.max_id_chars] or '_'}={_value(v)}"

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import re
 
-from aeroweaver_edge.agent.describe import bearing, describe, metres5
+from aeroweaver_edge.agent.describe import describe, place
 from aeroweaver_edge.observation import MissionView, Observation
 from aeroweaver_edge.wire import InboxMessage
 
@@ -27,6 +27,7 @@ MAX_FIELDS = 6  # body fields per message
 MAX_FACTS = 8
 MAX_WORD = 24
 MAX_GOAL = 200
+HUGE = 1e9  # a number this large is summarised as "huge": its digits would only add noise
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 
 
@@ -39,7 +40,9 @@ def _scalar(value: object) -> str:
         return "true" if value else "false"
     if isinstance(value, int | float):
         x = float(value)
-        return str(round(x)) if math.isfinite(x) else "nan"
+        if not math.isfinite(x):
+            return "nan"
+        return str(round(x)) if abs(x) < HUGE else ("huge" if x > 0 else "-huge")
     return _word(value)
 
 
@@ -54,11 +57,10 @@ def message_summary(msg: InboxMessage, own: tuple[float, float]) -> str:
     body = dict(msg.body)
     north, east = _finite(body.get("north")), _finite(body.get("east"))
     where = ""  # where a body's position lies, seen from this UAV
-    if north is not None and east is not None:
-        d = math.hypot(north - own[0], east - own[1])
-        where = f" at {metres5(d)} m {bearing(own, (north, east))}"
-        body.pop("north")
-        body.pop("east")
+    seen = None if north is None or east is None else place(own, north, east)
+    if seen is not None:
+        where = f" at {seen}"
+        del body["north"], body["east"]
     fields = [f"{_word(k)} {_scalar(v)}" for k, v in sorted(body.items())[:MAX_FIELDS]]
     text = " ".join([f"msg {_word(msg.h.sender)} {_word(msg.kind)}:", *fields])
     return text + where

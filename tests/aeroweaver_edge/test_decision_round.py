@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
+from aeroweaver_edge.agent.prompt import build_messages
 from aeroweaver_edge.agent.scripted import ReferenceScorer
 from aeroweaver_edge.config import AgentConfig, SafetyConfig
 from aeroweaver_edge.daemon import routing
@@ -346,3 +347,28 @@ async def test_experience_is_asked_only_when_it_can_change_the_pick(
     out = (await r.play(1))["uav0"]  # beta > 0 without a memory: no correction, no error
     assert out.chosen_by_agent
     assert not out.corrected
+
+
+@pytest.mark.parametrize("far", [1.7e308, -1.7e308, 1e12, 2**62])
+async def test_an_absurd_position_in_a_peer_message_is_data_not_a_crash(
+    registry: SkillRegistry, far: float
+) -> None:
+    """A peer's ``north``/``east`` is summarised as distance and bearing from the reader; a
+    finite but absurd one (the distance overflows to inf) once ended the receiver's daemon."""
+    r = rig(registry, "coverage", 2, COVER)
+    await r.play(0)
+    body: dict[str, str | int | float | bool] = {
+        "skill": "cover_landmark", "target_id": "L0", "north": far, "east": far
+    }  # fmt: skip
+    ref = await r.contexts["uav1"].link.send("*", "intent", body, round=1)
+    assert ref is not None
+    await r.play(1)
+    outs = await r.play(2, expect={"uav0": [ref]})
+    request = r.scorers["uav0"].requests[-1]
+    assert body in [m.body for m in request.observation.messages]
+    assert outs["uav0"].chosen_by_agent  # the round went through selection as usual
+    assert "huge" in outs["uav0"].state_text or "e+" in outs["uav0"].state_text
+    user = build_messages(request)[-1]["content"]
+    line = next(ln for ln in user.splitlines() if ln.startswith("uav1 intent"))
+    assert " m " not in line  # not a place ...
+    assert len(line) < 120  # ... and no 300-digit number
