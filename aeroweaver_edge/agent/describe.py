@@ -32,13 +32,20 @@ MAX_PLACE_M = 100_000.0
 is that large, and a hostile ``1.7e308`` would overflow the distance."""
 
 
-def place(own: Vec3 | tuple[float, float], north: float, east: float) -> str | None:
-    """``"<d> m <bearing>"`` from ``own`` to a reported (north, east), or ``None`` when the
-    position is not finite or lies beyond ``MAX_PLACE_M`` (then it is just two numbers)."""
-    if not (abs(north) <= MAX_PLACE_M and abs(east) <= MAX_PLACE_M):  # also rejects NaN
+def _coordinate(value: object) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
         return None
-    d = math.hypot(north - own[0], east - own[1])
-    return f"{metres5(d)} m {bearing(own, (north, east))}"
+    return float(value) if abs(value) <= MAX_PLACE_M else None  # also rejects NaN
+
+
+def place(own: Vec3 | tuple[float, float], north: object, east: object) -> str | None:
+    """``"<d> m <bearing>"`` from ``own`` to a reported (north, east), or ``None`` when that
+    is not a place: not two numbers, not finite, or beyond ``MAX_PLACE_M``."""
+    n, e = _coordinate(north), _coordinate(east)
+    if n is None or e is None:
+        return None
+    d = math.hypot(n - own[0], e - own[1])
+    return f"{metres5(d)} m {bearing(own, (n, e))}"
 
 
 def _entity_line(e: Entity, pos: Vec3) -> str:

@@ -95,12 +95,6 @@ def _value(value: str | int | float | bool) -> str:
     return _escape(json.dumps(text, ensure_ascii=True))
 
 
-def _finite(value: object) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    return float(value) if math.isfinite(value) else None
-
-
 def format_message(
     msg: InboxMessage, limits: PromptLimits, own: tuple[float, float] | None = None
 ) -> str:
@@ -115,8 +109,7 @@ def format_message(
     body = dict(msg.body)
     lead = [_value(v) for k in ("skill", "target_id") if (v := body.pop(k, "")) != ""]
     where = ""
-    north, east = _finite(body.get("north")), _finite(body.get("east"))
-    seen = None if own is None or north is None or east is None else place(own, north, east)
+    seen = None if own is None else place(own, body.get("north"), body.get("east"))
     if seen is not None:
         where = f"at {seen}"
         del body["north"], body["east"]

@@ -46,18 +46,11 @@ def _scalar(value: object) -> str:
     return _word(value)
 
 
-def _finite(value: object) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    return float(value) if math.isfinite(value) else None
-
-
 def message_summary(msg: InboxMessage, own: tuple[float, float]) -> str:
     """One received message as retrieval text: ``msg <from> <kind>: k v ... at D m B``."""
     body = dict(msg.body)
-    north, east = _finite(body.get("north")), _finite(body.get("east"))
     where = ""  # where a body's position lies, seen from this UAV
-    seen = None if north is None or east is None else place(own, north, east)
+    seen = place(own, body.get("north"), body.get("east"))
     if seen is not None:
         where = f" at {seen}"
         del body["north"], body["east"]
