@@ -8,7 +8,8 @@ type confusion, valid structs with adversarial values: NaN/inf, 2^63 epochs, hug
 spoofed senders, long text), with random, stale or genuine signature attachments. Each one
 goes through what a secured node does with it:
 
-    Codec.decode -> Verifier.check -> PeerLink._on_beacon / _on_inbox / _on_alive,
+    Codec.decode -> Verifier.check -> PeerLink._on_beacon / _on_inbox / _on_alive
+    (a peer message's body also through the retrieval summary and the prompt line),
     MissionState.update_context / update_assignment, ExperienceMemory.ingest,
     SimLink.on_perception / on_reward / on_episode (a daemon's link to the world),
     CommandCheck.admit + bound (the world's check of simulator commands)
@@ -37,6 +38,8 @@ from typing import Any, Literal
 import msgspec
 
 from aeroweaver_edge.agent.memory import ExperienceMemory
+from aeroweaver_edge.agent.prompt import PromptLimits, format_message
+from aeroweaver_edge.agent.state_text import message_summary
 from aeroweaver_edge.config import MeshConfig
 from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.mesh import Mesh
@@ -163,8 +166,14 @@ class Fuzzer:
                 role=self.text(),
             )
         if topic == "inbox":
-            values: list[str | int | float | bool] = [1, 2.5, True, "x" * r.choice([1, 3000])]
-            body = {self.text()[:50]: r.choice(values) for _ in range(r.choice([0, 1, 3, 200]))}
+            values: list[str | int | float | bool] = [
+                1, 2.5, True, "x" * r.choice([1, 3000]), *EVIL_FLOATS, *EVIL_INTS, 1.7e308
+            ]  # fmt: skip  # (1.7e308: a distance from it overflows)
+            keys = ["north", "east", "skill", "target_id"]  # the fields readers interpret
+            body = {
+                r.choice([*keys, self.text()[:50]]): r.choice(values)
+                for _ in range(r.choice([0, 1, 3, 200]))
+            }
             return InboxMessage(
                 h=h,
                 to=r.choice([ME, "uav1", ""]),
@@ -379,6 +388,10 @@ class Harness:
         link, mission = self.link, self.mission
         authenticated = self.verifier is not None
         if isinstance(msg, InboxMessage):
+            # What a round later does with an accepted body: the retrieval text and the
+            # prompt line. A peer can meet the routing rules, so both must take any body.
+            message_summary(msg, (12.0, -7.0))
+            format_message(msg, PromptLimits(), (12.0, -7.0))
             before = link.stats.rejected.total()
             link._on_inbox((case.key, msg))
             if link.inbox.pending >= link.limits.max_pending // 2:
