@@ -9,6 +9,7 @@ before the distance, so the retrieval tokeniser pairs them (``uav1~10``).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from aeroweaver_edge.observation import Observation, horizontal_distance
 from aeroweaver_edge.wire import Entity, Vec3
@@ -27,6 +28,10 @@ def metres5(x: float) -> int:
     return int(5 * round(x / 5))
 
 
+HUGE = 1e9
+"""A reported number this large is no measurement here; its digits would only cost tokens
+and blur retrieval, so the renderers abbreviate it."""
+
 MAX_PLACE_M = 100_000.0
 """A peer-reported position farther out than this (on either axis) is not a place: no arena
 is that large, and a hostile ``1.7e308`` would overflow the distance."""
@@ -38,12 +43,14 @@ def _coordinate(value: object) -> float | None:
     return float(value) if abs(value) <= MAX_PLACE_M else None  # also rejects NaN
 
 
-def place(own: Vec3 | tuple[float, float], north: object, east: object) -> str | None:
-    """``"<d> m <bearing>"`` from ``own`` to a reported (north, east), or ``None`` when that
-    is not a place: not two numbers, not finite, or beyond ``MAX_PLACE_M``."""
-    n, e = _coordinate(north), _coordinate(east)
+def pop_place(body: dict[str, Any], own: Vec3 | tuple[float, float]) -> str | None:
+    """``"<d> m <bearing>"`` from ``own`` to the body's (north, east), which it removes from
+    ``body``; ``None`` (body untouched) when that is not a place: not two numbers, not
+    finite, or beyond ``MAX_PLACE_M``."""
+    n, e = _coordinate(body.get("north")), _coordinate(body.get("east"))
     if n is None or e is None:
         return None
+    del body["north"], body["east"]
     d = math.hypot(n - own[0], e - own[1])
     return f"{metres5(d)} m {bearing(own, (n, e))}"
 

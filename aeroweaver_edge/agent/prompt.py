@@ -32,7 +32,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from aeroweaver_edge.agent.describe import place
+from aeroweaver_edge.agent.describe import HUGE, pop_place
 from aeroweaver_edge.observation import MissionView, Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
 from aeroweaver_edge.wire import InboxMessage
@@ -74,7 +74,7 @@ def compact_number(value: float) -> str:
     beyond a billion, three significant digits (``1.7e+308``)."""
     if not math.isfinite(value):
         return "null"
-    if abs(value) >= 1e9:  # no measurement here is that large; its digits would only cost tokens
+    if abs(value) >= HUGE:
         return f"{value:.3g}"
     rounded = round(value, 1)
     if rounded == int(rounded):
@@ -108,11 +108,8 @@ def format_message(
     """
     body = dict(msg.body)
     lead = [_value(v) for k in ("skill", "target_id") if (v := body.pop(k, "")) != ""]
-    where = ""
-    seen = None if own is None else place(own, body.get("north"), body.get("east"))
-    if seen is not None:
-        where = f"at {seen}"
-        del body["north"], body["east"]
+    seen = None if own is None else pop_place(body, own)
+    where = f"at {seen}" if seen is not None else ""
     keyed = [
         f"{_SAFE_KEY.sub('_', str(k))[: limits.max_id_chars] or '_'}={_value(v)}"
         for k, v in sorted(body.items())

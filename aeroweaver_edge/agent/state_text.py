@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import re
 
-from aeroweaver_edge.agent.describe import describe, place
+from aeroweaver_edge.agent.describe import HUGE, describe, pop_place
 from aeroweaver_edge.observation import MissionView, Observation
 from aeroweaver_edge.wire import InboxMessage
 
@@ -27,7 +27,6 @@ MAX_FIELDS = 6  # body fields per message
 MAX_FACTS = 8
 MAX_WORD = 24
 MAX_GOAL = 200
-HUGE = 1e9  # a number this large is summarised as "huge": its digits would only add noise
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 
 
@@ -49,11 +48,8 @@ def _scalar(value: object) -> str:
 def message_summary(msg: InboxMessage, own: tuple[float, float]) -> str:
     """One received message as retrieval text: ``msg <from> <kind>: k v ... at D m B``."""
     body = dict(msg.body)
-    where = ""  # where a body's position lies, seen from this UAV
-    seen = place(own, body.get("north"), body.get("east"))
-    if seen is not None:
-        where = f" at {seen}"
-        del body["north"], body["east"]
+    seen = pop_place(body, own)  # where a body's position lies, seen from this UAV
+    where = f" at {seen}" if seen is not None else ""
     fields = [f"{_word(k)} {_scalar(v)}" for k, v in sorted(body.items())[:MAX_FIELDS]]
     text = " ".join([f"msg {_word(msg.h.sender)} {_word(msg.kind)}:", *fields])
     return text + where
