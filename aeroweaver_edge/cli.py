@@ -14,10 +14,10 @@ import logging
 import os
 import signal
 import sys
-from collections.abc import Callable, Coroutine, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from aeroweaver_edge import defaults
 from aeroweaver_edge.cli_checks import (
@@ -32,6 +32,8 @@ from aeroweaver_edge.cli_checks import (
     int_in,
 )
 from aeroweaver_edge.cli_errors import ArgumentParser, report
+from aeroweaver_edge.cli_runner import Stopped
+from aeroweaver_edge.cli_runner import run_until_signal as _run
 from aeroweaver_edge.config import (
     MAX_UAVS,
     LLMConfig,
@@ -42,16 +44,6 @@ from aeroweaver_edge.config import (
 )
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
-
-T = TypeVar("T")
-
-
-class Stopped(Exception):
-    """The operator stopped the command with a signal."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
 
 
 def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
@@ -67,34 +59,6 @@ def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
     if args.llm_deadline is not None:
         fields["deadline_s"] = args.llm_deadline
     return parse_config(fields, LLMConfig, "LLM flags")
-
-
-def _run(coro: Coroutine[Any, Any, T], on_signal: Callable[[int], None] | None = None) -> T:
-    """Run a coroutine; SIGTERM and SIGINT cancel it so every session is closed, then
-    raise ``Stopped`` naming the signal."""
-    received: list[int] = []
-
-    async def main() -> T:
-        task = asyncio.current_task()
-        loop = asyncio.get_running_loop()
-
-        def stop(signum: int) -> None:
-            if not received and on_signal is not None:
-                on_signal(signum)
-            received.append(signum)
-            if task is not None:
-                task.cancel()
-
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.add_signal_handler(sig, stop, sig)
-        return await coro
-
-    try:
-        return asyncio.run(main())
-    except asyncio.CancelledError:
-        if received:
-            raise Stopped(received[0]) from None
-        raise
 
 
 def cmd_sim(args: argparse.Namespace) -> int:

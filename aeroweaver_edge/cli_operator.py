@@ -151,7 +151,8 @@ def add_parsers(sub: Any) -> None:
 
 def cmd_console(args: argparse.Namespace) -> int:
     require_extra("console")
-    from aeroweaver_edge.cli import Stopped, _run
+    from aeroweaver_edge.cli_runner import Stopped
+    from aeroweaver_edge.cli_runner import run_until_signal as _run
     from aeroweaver_edge.console.frames import TraceError
     from aeroweaver_edge.console.server import Console
 
@@ -182,7 +183,8 @@ def cmd_console(args: argparse.Namespace) -> int:
 
 def cmd_approve(args: argparse.Namespace) -> int:
     from aeroweaver_edge.approval import parse_action
-    from aeroweaver_edge.cli import Stopped, _run
+    from aeroweaver_edge.cli_runner import Stopped
+    from aeroweaver_edge.cli_runner import run_until_signal as _run
     from aeroweaver_edge.mesh import Mesh
     from aeroweaver_edge.operator import OperatorLink
     from aeroweaver_edge.wire import ApprovalRecord
@@ -215,7 +217,8 @@ def cmd_approve(args: argparse.Namespace) -> int:
 
 def cmd_mcp(args: argparse.Namespace) -> int:
     require_extra("mcp")
-    from aeroweaver_edge.cli import Stopped, _run
+    from aeroweaver_edge.cli_runner import Stopped
+    from aeroweaver_edge.cli_runner import run_until_signal as _run
     from aeroweaver_edge.mcp_server.server import McpOptions, serve
 
     mesh_cfg = mesh_from_args(args)

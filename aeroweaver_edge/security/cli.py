@@ -189,7 +189,8 @@ def cmd_keys_show(args: argparse.Namespace) -> int:
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from aeroweaver_edge.cli import Stopped, _run
+    from aeroweaver_edge.cli_runner import Stopped
+    from aeroweaver_edge.cli_runner import run_until_signal as _run
     from aeroweaver_edge.security.router import RouterError, check_router_config, run_router
 
     try:

@@ -1,0 +1,53 @@
+"""Run one command's coroutine so that SIGTERM and SIGINT close every session.
+
+It sits below ``cli.py`` and every command module (``cli_operator``, ``security.cli``,
+``sim.emulator.cli``), so a command module registers itself without importing the CLI
+that imports it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+from collections.abc import Callable, Coroutine
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+class Stopped(Exception):
+    """The operator stopped the command with a signal."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def run_until_signal(
+    coro: Coroutine[Any, Any, T], on_signal: Callable[[int], None] | None = None
+) -> T:
+    """Run a coroutine; SIGTERM and SIGINT cancel it so every session is closed, then
+    raise ``Stopped`` naming the signal."""
+    received: list[int] = []
+
+    async def main() -> T:
+        task = asyncio.current_task()
+        loop = asyncio.get_running_loop()
+
+        def stop(signum: int) -> None:
+            if not received and on_signal is not None:
+                on_signal(signum)
+            received.append(signum)
+            if task is not None:
+                task.cancel()
+
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, stop, sig)
+        return await coro
+
+    try:
+        return asyncio.run(main())
+    except asyncio.CancelledError:
+        if received:
+            raise Stopped(received[0]) from None
+        raise
