@@ -196,7 +196,7 @@ async def refusals_are_tool_errors(client: Client) -> None:
     arm = error(await client.call_tool("approve_action", {"uav": "uav0", "action": "arm"}))
     assert arm == ("invalid arguments for approve_action: action: Input should be 'takeoff', "
                    "'land' or 'return_home' (got 'arm')")  # fmt: skip
-    ttl = {"uav": "uav0", "action": "land", "ttl_s": "soon"}
+    ttl: dict[str, Any] = {"uav": "uav0", "action": "land", "ttl_s": "soon"}
     assert error(await client.call_tool("approve_action", ttl)) == (
         "invalid arguments for approve_action: ttl_s: Input should be a valid number, unable "
         "to parse string as a number (got 'soon')")  # fmt: skip
