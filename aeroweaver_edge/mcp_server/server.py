@@ -169,6 +169,12 @@ class SwarmService:
     def check_acting(self) -> None:
         if self.opts.operator_token is None:
             raise ToolError(READ_ONLY)
+        sec = self._mesh.security if self._mesh is not None else None
+        if sec is not None and sec.role.value != OPERATOR:  # the ACL would drop its writes
+            raise ToolError(
+                f"this server joined the secured swarm as {sec.config.identity!r} "
+                f"({sec.role.value}), which may not act: start it with --identity operator"
+            )
 
     def check_token(self, token: str) -> None:
         self.check_acting()

@@ -158,6 +158,23 @@ async def test_approvals_are_spelled_takeoff_in_and_out(secured: Secured) -> Non
         assert actions == {"takeoff"}
 
 
+async def test_an_observer_identity_cannot_promise_to_act(secured: Secured) -> None:
+    async with Client(mcp_server(secured, "--identity", "observer")) as client:
+        await roster_of(client, 3)
+        why = ("this server joined the secured swarm as 'observer' (observer), which may not "
+               "act: start it with --identity operator")  # fmt: skip
+        ask = await client.call_tool("approve_action", {"uav": "uav0", "action": "land"})
+        assert error(ask) == why  # the dry run already says so
+        assert error(await client.call_tool("stop_mission", {})) == why
+
+        # reading still works: the observer reads everything
+        async def levels() -> bool:
+            a = await resource(client, "aeroweaver://approvals")
+            return sorted(a) == list(UAVS)
+
+        await until(levels)
+
+
 async def test_sim_world_without_a_world_identity_is_refused_at_once(tmp_path: Path) -> None:
     keys = tmp_path / "keys"
     SwarmPki.create(keys, SWARM, default_members(1, world=False))
