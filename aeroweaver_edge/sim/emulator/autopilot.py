@@ -804,7 +804,8 @@ class EmulatedAutopilot:
 
     def _gcs_failsafe(self, now: float) -> None:
         """ArduCopter's GCS failsafe: armed only once SYSID_MYGCS was heard; after
-        FS_GCS_TIMEOUT of silence FS_GCS_ENABLE decides (1-3, 6: RTL; 4, 5: land; 7: brake).
+        FS_GCS_TIMEOUT of silence FS_GCS_ENABLE decides (1, 2: RTL; 3 SmartRTL and 6 Auto
+        RTL, unavailable here: RTL; 4 SmartRTL, unavailable: land; 5: land; 7: brake).
         The daemon heartbeats with the vehicle's own system id, so it never counts."""
         if self.p.name != "ardupilot" or self.gcs_seen_at is None:
             return
@@ -825,6 +826,10 @@ class EmulatedAutopilot:
         self._statustext(*texts.AP_GCS_FAILSAFE)
         if not self.armed or self.landed != IN_AIR:
             return
+        # No SMART_RTL mode and no mission here: ArduCopter's fallbacks, with their texts.
+        fallback = texts.AP_FAILSAFE_FALLBACK.get(enable)
+        if fallback is not None:
+            self._statustext(*fallback)
         if enable in (4, 5):
             self._land()
         elif enable == 7:

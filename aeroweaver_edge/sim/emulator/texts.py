@@ -31,6 +31,13 @@ AP_FENCE_BREACH: Text = (R.MAV_SEVERITY_NOTICE, "Polygon fence breached")
 AP_GCS_FAILSAFE: Text = (R.MAV_SEVERITY_WARNING, "GCS Failsafe")
 AP_GCS_FAILSAFE_DISARM: Text = (R.MAV_SEVERITY_WARNING, "GCS Failsafe - Disarming")
 AP_GCS_FAILSAFE_CLEARED: Text = (R.MAV_SEVERITY_WARNING, "GCS Failsafe Cleared")
+# FS_*_ENABLE value -> what ArduCopter says when the mode it asks for is unavailable (the
+# emulator has no SMART_RTL mode and no mission with DO_LAND_START).
+AP_FAILSAFE_FALLBACK: dict[int, Text] = {
+    3: (R.MAV_SEVERITY_WARNING, "SmartRTL Unavailable, Trying RTL Mode"),
+    4: (R.MAV_SEVERITY_WARNING, "SmartRTL Unavailable, Using Land Mode"),
+    6: (R.MAV_SEVERITY_WARNING, "Trying RTL Mode"),
+}
 
 # PX4's nav_state_names for the modes the emulator knows (what a refusal names).
 PX4_MODE_NAMES: dict[str, str] = {

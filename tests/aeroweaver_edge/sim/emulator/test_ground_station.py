@@ -27,7 +27,7 @@ from pymavlink import mavutil
 M = mavutil.mavlink
 GEOFENCE = M.MAV_SYS_STATUS_GEOFENCE
 PX4_LOITER = PX4.modes["AUTO.LOITER"]
-AP_GUIDED, AP_BRAKE, AP_RTL = 4, 17, 6
+AP_GUIDED, AP_BRAKE, AP_RTL, AP_LAND = 4, 17, 6, 9
 
 
 @dataclass
@@ -205,8 +205,12 @@ def test_px4_says_what_px4_says_on_a_refused_mode_a_landing_and_an_offboard_loss
         assert status.onboard_control_sensors_present & GEOFENCE == 0
 
 
-def test_ardupilot_gcs_failsafe_says_so_and_returns_home() -> None:
-    params = {"FS_GCS_TIMEOUT": 1.0, "FS_GCS_ENABLE": 1}
+@pytest.mark.parametrize(
+    ("enable", "mode", "fallback"),
+    [(1, AP_RTL, None), (4, AP_LAND, "SmartRTL Unavailable, Using Land Mode")],
+)
+def test_ardupilot_gcs_failsafe_says_so_and_acts(enable: int, mode: int, fallback: str) -> None:
+    params = {"FS_GCS_TIMEOUT": 1.0, "FS_GCS_ENABLE": enable}
     with ground_station("ardupilot", params) as (host, gcs):
         assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, AP_GUIDED) == M.MAV_RESULT_ACCEPTED
         assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
@@ -217,7 +221,9 @@ def test_ardupilot_gcs_failsafe_says_so_and_returns_home() -> None:
         host.vehicles[0].faults.deaf = True  # our heartbeats stop reaching the vehicle
         sev, txt = gcs.text("GCS Failsafe", timeout=4.0)
         assert (sev, txt) == (M.MAV_SEVERITY_WARNING, "GCS Failsafe")
-        gcs.wait("RTL", lambda m: m.get_type() == "HEARTBEAT" and gcs.mode() == AP_RTL)
+        if fallback is not None:  # no SMART_RTL mode here: ArduCopter's fallback and its text
+            assert gcs.text(fallback) == (M.MAV_SEVERITY_WARNING, fallback)
+        gcs.wait(f"mode {mode}", lambda m: m.get_type() == "HEARTBEAT" and gcs.mode() == mode)
 
         host.vehicles[0].faults.deaf = False
         assert gcs.text("GCS Failsafe Cleared", timeout=3.0)[0] == M.MAV_SEVERITY_WARNING
