@@ -186,6 +186,10 @@ class FrameStore:
             await self.wait_change(left)
 
     def close(self) -> None:
+        """The console is going away: every stream sends ``ended`` once more and stops."""
+        if not self.meta.get("ended"):
+            self.meta = {**self.meta, "ended": True}
+            self.meta_version += 1
         self.closed = True
         self._changed()
 
