@@ -145,8 +145,8 @@ async def test_the_console_draws_a_field_swarm_of_emulated_vehicles(tmp_path: Pa
     async_playwright = browser_or_skip()
     router, udp = free_port(), udp_base(3)
     (tmp_path / "router.json5").write_text(
-        '{ mode: "router", listen: { endpoints: ["tcp/127.0.0.1:%d"] },\n'
-        "  scouting: { multicast: { enabled: false } } }\n" % router,
+        f'{{ mode: "router", listen: {{ endpoints: ["tcp/127.0.0.1:{router}"] }},\n'
+        "  scouting: { multicast: { enabled: false } } }\n",
         encoding="utf-8",
     )
     async with processes(tmp_path) as p:
@@ -190,11 +190,8 @@ async def test_the_console_draws_a_field_swarm_of_emulated_vehicles(tmp_path: Pa
                 )
                 assert await page.text_content("#mode") == "ended"
                 assert await page.evaluate("window.__aw.frames.length") > 10  # kept
-                await page.screenshot(path=str(tmp_path / "field.png"))
-                if os.environ.get("AEROWEAVER_CONSOLE_FIELD_SCREENSHOT"):
-                    Path(os.environ["AEROWEAVER_CONSOLE_FIELD_SCREENSHOT"]).write_bytes(
-                        (tmp_path / "field.png").read_bytes()
-                    )
+                shot = os.environ.get("AEROWEAVER_CONSOLE_FIELD_SCREENSHOT")
+                await page.screenshot(path=shot or str(tmp_path / "field.png"))
                 assert errors == []
             finally:
                 await ctx.close()
@@ -215,14 +212,17 @@ async def check_flying(page: Any, spawn: dict[str, list[float]]) -> None:
     await page.wait_for_function(
         """(b) => window.__aw.markers.filter((m) => m.ours).every(
              (m) => Math.hypot(m.x - b[m.id][0], m.y - b[m.id][1]) > 4)""",
-        arg=spawn, timeout=30_000,
+        arg=spawn,
+        timeout=30_000,
     )  # every marker moved from where it stood (the vehicles fly toward their landmarks)
     targets = await page.eval_on_selector_all(
         "#targets tr[data-target]", "rs => rs.map(r => r.dataset.target)"
     )
     assert targets == ["L0", "L1", "L2"]
     await page.wait_for_selector("#targets tr.covered", timeout=60_000)
-    legend = await page.eval_on_selector_all("#legend [data-glyph]", "s => s.map(x => x.dataset.glyph)")
+    legend = await page.eval_on_selector_all(
+        "#legend [data-glyph]", "s => s.map(x => x.dataset.glyph)"
+    )
     assert {"k:landmark", "k:landmark:c", "held", "trail", "stale"} <= set(legend)
 
 
