@@ -452,7 +452,8 @@ function renderSide(f) {
   const ours = new Set(f.uavs || []), held = new Set(f.held || []), absent = new Set(f.absent || []);
   const veh = f.vehicles || {};
   const withLink = Object.keys(veh).length > 0;
-  $("uavs").tHead.innerHTML = "<tr><th>UAV</th><th>role</th>" +
+  // with a vehicle link the row is wide: the role moves into the UAV cell's tooltip
+  $("uavs").tHead.innerHTML = `<tr><th>UAV</th>${withLink ? "" : "<th>role</th>"}` +
     (withLink ? '<th title="flight mode the autopilot reports">mode</th><th title="armed">arm</th><th title="altitude above the origin">alt</th><th title="battery remaining">batt</th><th title="age of the vehicle\'s last heartbeat when the UAV reported (+ the report\'s own age when stale)">hb</th><th title="the daemon\'s flight phase">phase</th>' : "") +
     "<th>skill</th><th>hold</th></tr>";
   const rows = [];
@@ -461,7 +462,7 @@ function renderSide(f) {
     const role = b.role || (S.meta.roles || {})[b.id] || "";
     const sel = b.id === S.selected ? " sel" : "";
     if (!ours.has(b.id)) {
-      rows.push(`<tr data-uav="${esc(b.id)}" class="opp${sel}"><td>${esc(b.id)}</td><td>${esc(role)}</td>${withLink ? '<td colspan="6"></td>' : ""}<td>(the world's agent)</td><td></td></tr>`);
+      rows.push(`<tr data-uav="${esc(b.id)}" class="opp${sel}"><td title="${esc(role)}">${esc(b.id)}</td>${withLink ? '<td colspan="6"></td>' : `<td>${esc(role)}</td>`}<td>(the world's agent)</td><td></td></tr>`);
       continue;
     }
     const hold = held.has(b.id) ? (d && d.hold_cause ? d.hold_cause : "hold") : "";
@@ -475,7 +476,7 @@ function renderSide(f) {
         `<td class="hb num${late ? " hold" : ""}" title="last report ${fmt(x.heard_s, " s", 1)} ago">${fmt(hb, " s", 1)}</td><td class="phase">${esc(x.phase || "—")}</td>`;
     }
     const cls = `${absent.has(b.id) || (veh[b.id] && veh[b.id].heard_s > STALE_S) ? "stale" : ""}${sel}`.trim();
-    rows.push(`<tr data-uav="${esc(b.id)}"${cls ? ` class="${cls}"` : ""}><td>${esc(b.id)}</td><td>${esc(role)}</td>${link}` +
+    rows.push(`<tr data-uav="${esc(b.id)}"${cls ? ` class="${cls}"` : ""}><td title="role ${esc(role)}">${esc(b.id)}</td>${withLink ? link : `<td>${esc(role)}</td>`}` +
       `<td class="skill" title="${esc(d ? d.invocation : "")}">${esc(d ? d.invocation : "…")}</td><td class="hold">${esc(hold)}</td></tr>`);
   }
   $("uavs").tBodies[0].innerHTML = rows.join("");
@@ -549,7 +550,10 @@ function renderDecision(f) {
   const uav = S.selected;
   const d = (f.decisions || {})[uav];
   const goal = (S.meta.goals || {})[uav];
-  let html = `<h3>${esc(uav)} <span class="kv">round ${f.round + 1}</span></h3>`;
+  const vr = (f.vehicles || {})[uav];
+  const when = f.source === "field" ? `its round ${vr ? vr.round + 1 : "?"}` : `round ${f.round + 1}`;
+  const role = (S.meta.roles || {})[uav];
+  let html = `<h3>${esc(uav)} <span class="kv">${esc(when)}${role ? ` · ${esc(role)}` : ""}</span></h3>`;
   if (goal) html += `<div class="kv">goal: ${esc(goal)}</div>`;
   if (!(f.uavs || []).includes(uav)) { box.innerHTML = html + "<div class=\"kv\">flown by the world (a scripted opponent)</div>"; return; }
   if (!d) { box.innerHTML = html + '<div class="kv">no report for this round yet</div>'; return; }

@@ -180,6 +180,10 @@ async def test_the_console_draws_a_field_swarm_of_emulated_vehicles(tmp_path: Pa
                 spawn = await page.evaluate(MARKERS)  # on the ground, before the mission
                 await page.wait_for_function(ROWS_FLYING, timeout=90_000)
                 await check_flying(page, spawn)
+                await page.click('#uavs tr[data-uav="uav1"]')  # its last decision, on the side
+                await page.wait_for_selector("#decision tr.chosen", timeout=10_000)
+                shot = os.environ.get("AEROWEAVER_CONSOLE_FIELD_SCREENSHOT")  # docs/console.png
+                await page.screenshot(path=shot or str(tmp_path / "field.png"))
                 rc = await asyncio.wait_for(mission.wait(), 120)
                 assert rc == 0, p.log("mission")
                 await check_ended(page)
@@ -190,8 +194,7 @@ async def test_the_console_draws_a_field_swarm_of_emulated_vehicles(tmp_path: Pa
                 )
                 assert await page.text_content("#mode") == "ended"
                 assert await page.evaluate("window.__aw.frames.length") > 10  # kept
-                shot = os.environ.get("AEROWEAVER_CONSOLE_FIELD_SCREENSHOT")
-                await page.screenshot(path=shot or str(tmp_path / "field.png"))
+                await page.screenshot(path=str(tmp_path / "ended.png"))
                 assert errors == []
             finally:
                 await ctx.close()
