@@ -252,8 +252,15 @@ function drawMap(now) {
   const f = frameAt(S.cur);
   if (!f) {
     ctx.fillStyle = "#8897a8"; ctx.font = "14px system-ui"; ctx.textAlign = "center";
-    const up = (S.meta.alive || []).filter((a) => /^uav/.test(a));
-    ctx.fillText(up.length ? `${up.length} daemon(s) up (${up.join(", ")}): waiting for their first round…` : "waiting for the first round…", v.cx, v.cy);
+    // who is up says what the page is waiting for (alive/uav/<id> tokens; the world's token)
+    const alive = S.meta.alive || [];
+    const up = alive.filter((a) => /^uav/.test(a));
+    const lines = !up.length ? ["waiting for the first round… (no UAV daemon is up yet)"]
+      : alive.includes("world") ? [`${up.length} daemon(s) up; waiting for the world's first round…`]
+      : [`${up.length} daemon(s) up (${up.slice(0, 6).join(", ")}${up.length > 6 ? ", …" : ""}), no round report yet:`,
+        "field daemons report every round; daemons on the sim backend wait for a simulated world",
+        "(aeroweaver mission start --sim-world)"];
+    lines.forEach((t, k) => ctx.fillText(t, v.cx, v.cy + 18 * (k - (lines.length - 1) / 2)));
     ctx.textAlign = "left";
     S.markers = []; S.labels = [];
     return;

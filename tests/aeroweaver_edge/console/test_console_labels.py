@@ -107,6 +107,15 @@ async def test_labels_never_overlap(tmp_path: Path, n: int) -> None:
                 "#targets tr[data-target] td.claimed", "s => s.map(x => x.textContent)"
             )
             assert claimed[0].split(", ")[0] == "uav0"  # uav0 heads for L0
+            # the cost of a full map draw with its label placement (pytest -s prints it)
+            ms = await page.evaluate(
+                "(() => { const t = []; for (let k = 0; k < 30; k++) {"
+                " const t0 = performance.now(); drawMap(performance.now());"
+                " t.push(performance.now() - t0); } t.sort((a, b) => a - b);"
+                " return [t[15], t[28]]; })()"
+            )
+            print(f"{n} packed UAVs: map draw p50 {ms[0]:.1f} ms, p95 {ms[1]:.1f} ms")
+            assert ms[0] < 100  # a sanity bound only: the machine may be loaded
             if n == 20:
                 await page.screenshot(path=str(tmp_path / "labels.png"))
             assert errors == []
