@@ -163,3 +163,23 @@ async def test_every_stream_hears_that_the_console_ended(tmp_path: Path) -> None
             await closing
     assert metas[0].get("ended") is None
     assert metas[-1]["ended"] is True
+
+
+async def test_field_samples_and_world_rounds_never_collide() -> None:
+    store = FrameStore()
+    hf = HeaderFactory("uav0")
+    view = FieldView()
+    view.on_report(report(hf.next(), "uav0", 0, status(1.0, 1.0)))
+    sample = view.frame("coverage")
+    assert sample is not None
+    assert (sample["episode"], sample["round"]) == (0, 0)
+    assert store.add_frame(sample) == 0
+    assert store.add_frame({"episode": 0, "round": 0, "decisions": {}}) == 1  # a world round
+    store.add_decision(0, 0, "uav0", {"chosen": "B"})  # patches the world round only
+    assert store.frame(1) == {
+        "episode": 0,
+        "round": 0,
+        "i": 1,
+        "decisions": {"uav0": {"chosen": "B"}},
+    }
+    assert store.frame(0)["decisions"]["uav0"]["invocation"] == "cover_landmark(target_id=L0)"  # type: ignore[index]
