@@ -12,7 +12,7 @@ const S = {
   meta: {}, frames: [], base: 0, cur: -1, follow: true, playing: true,
   selected: null, approvals: {}, roleColour: {}, anim: null, msgs: [],
   drawn: [], markers: [], labels: [], lastPlay: 0, es: null, backfilling: false,
-  dirtyMap: true, mapSize: "", fitHalf: 20, ended: false, endedWhy: "", serverGone: false, legendSig: "", scaleBar: null,
+  dirtyMap: true, mapSize: "", fitHalf: 20, ended: false, stopped: false, endedAt: -1, endedWhy: "", serverGone: false, legendSig: "", scaleBar: null,
   dirtySide: false, dirtyCharts: false, chartsAt: 0,
 };
 window.__aw = S; // for tests and the latency bench: state, drawn rounds, marker positions
@@ -423,7 +423,7 @@ function tick(now) {
   if (S.playing && !S.follow && S.cur < lastIndex()) {
     const stepMs = (1000 * (Number(S.meta.round_s) || 0.5)) / Number($("speed").value);
     if (now - S.lastPlay >= stepMs) { S.lastPlay = now; show(S.cur + 1); S.dirtyCharts = true; }
-  } else if (S.playing && !S.follow && S.meta.mode === "live" && !S.ended) {
+  } else if (S.playing && !S.follow && S.meta.mode === "live" && !S.stopped) {
     S.follow = true; // caught up with the live run
     updateButtons();
   }
@@ -478,7 +478,7 @@ function renderSide(f) {
       const x = veh[b.id] || {};
       const late = x.heard_s > STALE_S;
       const hb = x.heartbeat_age_s == null ? null : x.heartbeat_age_s + (late ? x.heard_s : 0);
-      link = `<td class="mode">${esc(x.mode || "—")}</td><td class="armed">${x.armed == null ? "—" : x.armed ? "armed" : "safe"}</td>` +
+      link = `<td class="mode" title="${esc(x.mode || "")}">${esc(x.mode || "—")}</td><td class="armed">${x.armed == null ? "—" : x.armed ? "armed" : "safe"}</td>` +
         `<td class="alt num">${fmt(x.alt_m, " m", 1)}</td><td class="batt num">${fmt(x.battery_pct, " %", 0)}</td>` +
         `<td class="hb num${late ? " hold" : ""}" title="last report ${fmt(x.heard_s, " s", 1)} ago">${fmt(hb, " s", 1)}</td><td class="phase">${esc(x.phase || "—")}</td>`;
     }
@@ -670,7 +670,8 @@ function askApprove(uav, action) {
 function updateButtons() {
   $("play").textContent = S.playing ? "pause" : "play";
   $("live").classList.toggle("on", S.follow);
-  $("live").style.display = S.meta.mode === "live" && !S.ended ? "" : "none";
+  $("live").style.display = S.meta.mode === "live" && !S.stopped ? "" : "none";
+  $("replay").style.display = S.ended ? "" : "none";
 }
 
 function endedWhy(meta) {
@@ -683,9 +684,12 @@ function endedWhy(meta) {
 function applyMeta(meta) {
   S.meta = meta; S.dirtyMap = true;
   const why = endedWhy(meta);
-  if (why && !S.ended) { S.follow = false; S.playing = false; S.endedAt = lastIndex(); } // hold; play replays
+  // The run or the console is over: no more frames, hold the last one (play replays).
+  // Only the mission ended: frames still come (the UAVs land), so keep following them.
+  const stopped = Boolean(meta.ended || S.serverGone);
+  if (stopped && !S.stopped) { S.follow = false; S.playing = false; S.endedAt = lastIndex(); }
   if (!why && S.ended && meta.mode === "live") { S.follow = true; S.playing = true; } // a new mission
-  S.ended = Boolean(why); S.endedWhy = why;
+  S.ended = Boolean(why); S.endedWhy = why; S.stopped = stopped;
   const mode = why ? "ended" : meta.mode || "live";
   $("mode").textContent = mode; $("mode").className = `badge ${mode}`;
   $("mode").title = why;
@@ -751,9 +755,10 @@ async function start() {
   $("play").onclick = () => {
     S.playing = !S.playing;
     if (!S.playing) S.follow = false;
-    else if ((S.meta.mode === "replay" && S.cur >= lastIndex()) || (S.ended && S.cur >= S.endedAt)) show(S.base);
+    else if ((S.meta.mode === "replay" && S.cur >= lastIndex()) || (S.stopped && S.cur >= S.endedAt)) show(S.base);
     updateButtons();
   };
+  $("replay").onclick = () => { S.follow = false; S.playing = true; S.lastPlay = 0; show(S.base); drawCharts(); updateButtons(); };
   $("live").onclick = () => { S.follow = true; S.playing = true; show(lastIndex()); drawCharts(); updateButtons(); };
   $("scrub").oninput = () => { S.follow = false; S.playing = false; show(Number($("scrub").value)); drawCharts(); updateButtons(); };
   requestAnimationFrame(tick);

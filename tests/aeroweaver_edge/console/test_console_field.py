@@ -230,13 +230,21 @@ async def check_flying(page: Any, spawn: dict[str, list[float]]) -> None:
 
 
 async def check_ended(page: Any) -> None:
-    """After the mission: ENDED, the stop button disabled, and play replays from the start."""
+    """After the mission: ENDED and the stop button disabled, while the page still follows
+    the UAVs (they land); "replay" plays what it saw from the first frame."""
     await page.wait_for_function(
         "document.getElementById('mode').textContent === 'ended'", timeout=15_000
     )
     assert await page.is_disabled("#stop")
+    assert await page.evaluate("window.__aw.follow")  # still connected: the landing shows
+    await page.wait_for_function(
+        "(() => { const S = window.__aw; const f = S.frames[S.cur - S.base];"
+        " return Object.values(f.vehicles).every(v => v.phase !== 'mission'); })()",
+        timeout=30_000,
+    )  # the flight phases left the mission (landing, then on the ground)
     last = await page.evaluate("window.__aw.cur")
-    base = await page.evaluate("window.__aw.base")
-    await page.click("#play")
-    await page.wait_for_function(f"window.__aw.cur > {base} && window.__aw.cur < {last}")
+    await page.click("#replay")
+    await page.wait_for_function(
+        f"window.__aw.cur > window.__aw.base && window.__aw.cur < {last} && !window.__aw.follow"
+    )
     assert await page.evaluate("window.__aw.playing")
