@@ -521,6 +521,7 @@ class UavDaemon:
                 llm_calls=llm_calls,
                 llm_class=str(llm_class),
                 decision=self._decision(out),
+                vehicle=self.phases.status(getattr(self.ports.perception, "points", ())),
                 **self._counters(),
             ),
         )

@@ -24,14 +24,17 @@ import asyncio
 import logging
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Literal
 
+import msgspec
+
 from aeroweaver_edge.actions import VehicleAction
 from aeroweaver_edge.observation import VehicleState
 from aeroweaver_edge.ports import Health, Vehicle
+from aeroweaver_edge.wire import MAX_POINTS, Entity, VehicleStatus
 
 log = logging.getLogger(__name__)
 ALTITUDE_TOLERANCE_M = 0.3
@@ -226,6 +229,18 @@ class FlightPhases:
             self.stats.refused_motion["recovery"] += 1
             return False
         return True
+
+    def status(self, points: Sequence[Entity] = ()) -> VehicleStatus | None:
+        """What the backend's link reports (mode, armed, battery...) with this phase and the
+        known ``points``, for the round report; None when the backend reports nothing."""
+        read = getattr(self.inner, "telemetry", None)
+        try:
+            st = read() if read is not None else None
+        except Exception:  # telemetry for observers must never cost a round
+            return None
+        if not isinstance(st, VehicleStatus):
+            return None
+        return msgspec.structs.replace(st, phase=self.phase.value, points=list(points)[:MAX_POINTS])
 
     # -- the Vehicle port ----------------------------------------------------------------
 

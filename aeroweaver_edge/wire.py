@@ -101,6 +101,27 @@ class DecisionDetail(msgspec.Struct, frozen=True, kw_only=True):
     omitted_bound: float | None = None  # log-prob bound on labels that did not come back
 
 
+MAX_POINTS: Final = 32
+Short = Annotated[str, msgspec.Meta(max_length=64)]
+
+
+class VehicleStatus(msgspec.Struct, frozen=True, kw_only=True):
+    """What a UAV's own vehicle link says at the end of a round, for observers (the console
+    draws a field swarm from it when no simulated world publishes snapshots). Optional where
+    the link does not report it; data only, nothing acts on it."""
+
+    pos: Vec3  # local NED, metres
+    vel: Vec3 = (0.0, 0.0, 0.0)
+    armed: bool | None = None
+    in_air: bool | None = None
+    mode: Short = ""  # the autopilot's flight mode name, e.g. OFFBOARD, AUTO.LAND
+    battery_pct: float | None = None  # remaining, 0..100 (None: the link does not say)
+    heartbeat_age_s: float | None = None  # since the vehicle's last heartbeat
+    phase: Short = ""  # the daemon's flight phase (flight_phases.Phase)
+    points: Annotated[list[Entity], msgspec.Meta(max_length=MAX_POINTS)] = []
+    """The known points of interest this UAV flies by (field config), e.g. landmarks."""
+
+
 class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     """Per-round progress; (``phase="ready"``) the ack that a UAV holds its assignment;
     (``phase="final"``) the daemon's last counters as it stops; or (``phase="experience"``)
@@ -138,6 +159,7 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     missing_messages: int = 0  # cumulative: expected messages that never came
     experience_shared: int = 0  # experience phase: own records of ``episode`` published
     experience_taken: int = 0  # experience phase: peers' records of ``episode`` taken
+    vehicle: VehicleStatus | None = None  # round phase: the vehicle link's view (field)
 
 
 class MissionContext(msgspec.Struct, frozen=True, kw_only=True, tag="context"):

@@ -144,7 +144,8 @@ class ConsoleApp:
         patch_seq = store.patch_seq
         meta_v = approvals_v = -1
         yield "retry: 1000\n\n"
-        while not store.closed:
+        while True:
+            closed = store.closed  # one last pass after the close: the page learns it ended
             out: list[str] = []
             if store.meta_version != meta_v:
                 meta_v = store.meta_version
@@ -161,6 +162,8 @@ class ConsoleApp:
                     out.append(_event("patch", {"i": i, "decisions": decisions}))
                 patch_seq = store.patch_seq
             yield "".join(out) if out else ": keep-alive\n\n"
+            if closed:
+                return
             await store.wait_change(KEEPALIVE_S)
             if store.last_index == last and not store.closed:
                 # Only decisions or status changed: let a burst of reports gather into one

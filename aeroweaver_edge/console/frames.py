@@ -186,6 +186,10 @@ class FrameStore:
             await self.wait_change(left)
 
     def close(self) -> None:
+        """The console is going away: every stream sends ``ended`` once more and stops."""
+        if not self.meta.get("ended"):
+            self.meta = {**self.meta, "ended": True}
+            self.meta_version += 1
         self.closed = True
         self._changed()
 
@@ -203,16 +207,21 @@ class FrameStore:
         return self.frames[max(0, start - self.first) :]
 
     def add_frame(self, frame: dict[str, Any]) -> int:
+        # A field frame (``field.py``) is a sample, not a world round: it carries its own
+        # decisions and takes no patches, so it never enters the (episode, round) index.
+        sample = frame.get("source") == "field"
         key = (frame["episode"], frame["round"])
-        if key in self._where:  # the same round again (a duplicate snapshot): keep the first
+        if not sample and key in self._where:  # a duplicate snapshot: keep the first
             return self._where[key]
         frame["i"] = i = self.first + len(self.frames)
-        frame["decisions"] = {**self._early.pop(key, {}), **frame.get("decisions", {})}
+        if not sample:
+            frame["decisions"] = {**self._early.pop(key, {}), **frame.get("decisions", {})}
+            self._where[key] = i
         self.frames.append(frame)
-        self._where[key] = i
         if len(self.frames) > self.max_frames:
             old = self.frames.pop(0)
-            self._where.pop((old["episode"], old["round"]), None)
+            if old.get("source") != "field":
+                self._where.pop((old["episode"], old["round"]), None)
             self.first += 1
         self._changed()
         return i

@@ -9,6 +9,10 @@ One Zenoh session (``MeshConfig``; with ``[mesh.security]`` the ``observer`` ide
 * ``uav/*/approval``: vehicle actions waiting for an operator, and the approval records;
 * ``alive/**``: who is up.
 
+With no simulated world (no ``alive/world`` token, no snapshot for ``WORLD_QUIET_S``), the
+frames are sampled from the UAVs' round reports instead (``field.FieldView``): a swarm of
+real or emulated vehicles is drawn from what its daemons say their vehicles report.
+
 Callbacks only enqueue (``Mesh``); the pumps run on the loop and feed a ``FrameStore``.
 """
 
@@ -16,8 +20,10 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from typing import TYPE_CHECKING, Any
 
+from aeroweaver_edge.console.field import PERIOD_S, FieldView
 from aeroweaver_edge.console.frames import FrameStore, report_decision, snapshot_frame
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.operator import record_dict
@@ -34,6 +40,7 @@ if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh, Subscription
 
 log = logging.getLogger(__name__)
+WORLD_QUIET_S = 5.0
 
 
 def approval_dict(st: ApprovalStatus) -> dict[str, Any]:
@@ -48,7 +55,9 @@ def approval_dict(st: ApprovalStatus) -> dict[str, Any]:
 class SwarmObserver:
     """Follows one swarm on an open mesh and keeps ``store`` current."""
 
-    def __init__(self, mesh: Mesh, swarm: str, store: FrameStore) -> None:
+    def __init__(
+        self, mesh: Mesh, swarm: str, store: FrameStore, field_period_s: float = PERIOD_S
+    ) -> None:
         self.mesh = mesh
         self.swarm = swarm
         self.keys = Keys(swarm)
@@ -58,6 +67,9 @@ class SwarmObserver:
         self._context: MissionContext | None = None
         self._assign: dict[str, Assignment] = {}
         self._tasks: list[asyncio.Task[None]] = []
+        self.field = FieldView()
+        self.field_period_s = field_period_s
+        self._world_at = -1e9  # monotonic time of the last world snapshot
 
     async def start(self) -> None:
         m, k = self.mesh, self.keys
@@ -79,6 +91,7 @@ class SwarmObserver:
             )
         watch = m.watch_liveliness(k.alive_all)
         self._tasks.append(asyncio.create_task(self._pump_alive(watch), name="console-alive"))
+        self._tasks.append(asyncio.create_task(self._sample_field(), name="console-field"))
         self.store.update_meta(mode="live", swarm=self.swarm)
         await self.catch_up()
 
@@ -111,17 +124,39 @@ class SwarmObserver:
                 (self.uavs.add if alive else self.uavs.discard)(name)
             self.store.update_meta(alive=sorted(self.alive))
 
+    @property
+    def world(self) -> bool:
+        """A simulated world is running (its token, or a recent snapshot)."""
+        return "world" in self.alive or time.monotonic() - self._world_at < WORLD_QUIET_S
+
+    async def _sample_field(self) -> None:
+        """No world: a frame from the UAVs' latest reports every ``field_period_s``."""
+        while True:
+            await asyncio.sleep(self.field_period_s)
+            if self.world:
+                continue
+            ctx = self._context
+            frame = self.field.frame(ctx.task if ctx is not None else "")
+            if frame is not None:
+                if self.store.meta.get("source") != "field":
+                    self.store.update_meta(source="field")
+                self.store.add_frame(frame)
+
     # -- handlers (on the loop) ---------------------------------------------------------
 
     def _on_snapshot(self, snap: WorldSnapshot) -> None:
         if snap.h.sender != "world":
             return
+        self._world_at = time.monotonic()
         if self.store.meta.get("task") != snap.task or "arena_half_m" not in self.store.meta:
             self.store.update_meta(
                 task=snap.task, arena_half_m=snap.arena_half_m,
                 comm_radius_m=snap.comm_radius_m, sensing_radius_m=snap.sensing_radius_m,
             )  # fmt: skip
-        self.store.add_frame(snapshot_frame(snap))
+        frame = snapshot_frame(snap)
+        if self.field.flying:  # sim --link: the daemons also report their vehicle links
+            frame["vehicles"] = self.field.vehicles()
+        self.store.add_frame(frame)
 
     def _on_report(self, rep: ProgressReport) -> None:
         if rep.phase != "round" or rep.h.sender != rep.uav:
@@ -129,7 +164,9 @@ class SwarmObserver:
         ctx = self._context
         if ctx is not None and rep.mission_id and rep.mission_id != ctx.mission_id:
             return  # another mission's report
-        self.store.add_decision(rep.episode, rep.round, rep.uav, report_decision(rep))
+        self.field.on_report(rep)
+        if self.world or rep.vehicle is None:  # field frames carry their own decisions
+            self.store.add_decision(rep.episode, rep.round, rep.uav, report_decision(rep))
 
     def _on_context(self, ctx: MissionContext) -> None:
         if ctx.h.sender != "cmdr":

@@ -32,6 +32,7 @@ from aeroweaver_edge.ports import Health
 from aeroweaver_edge.vehicle.errors import VehicleError
 from aeroweaver_edge.vehicle.mavlink.geo import GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.personality import PERSONALITIES, ParamRule
+from aeroweaver_edge.wire import VehicleStatus
 
 if TYPE_CHECKING:
     from aeroweaver_edge.config import SafetyConfig, VehicleConfig
@@ -326,6 +327,15 @@ class MavsdkVehicle:
         if self.pos is None:
             raise VehicleError(f"{self.name}: no position telemetry yet")
         return VehicleState(self.pos, self.vel, armed=self.armed, in_air=self.in_air)
+
+    def telemetry(self) -> VehicleStatus | None:
+        """Mode and armed as MAVSDK last reported them (observers); no battery feed here."""
+        if self.pos is None:
+            return None
+        return VehicleStatus(
+            pos=self.pos, vel=self.vel, armed=self.armed, in_air=self.in_air,
+            mode=self.flight_mode[:64],
+        )  # fmt: skip
 
     async def health(self) -> Health:
         if not self._fresh():

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from aeroweaver_edge.observation import VehicleState
 from aeroweaver_edge.ports import Health, Vehicle
+from aeroweaver_edge.wire import VehicleStatus
 
 
 class MirroredVehicle:
@@ -22,6 +23,10 @@ class MirroredVehicle:
 
     async def health(self) -> Health:
         return await self.primary.health()
+
+    def telemetry(self) -> VehicleStatus | None:
+        read = getattr(self.primary, "telemetry", None)
+        return read() if read is not None else None
 
     async def arm(self) -> None:
         await self.primary.arm()

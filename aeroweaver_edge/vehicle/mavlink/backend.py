@@ -44,6 +44,7 @@ from aeroweaver_edge.vehicle.mavlink.signing import (
 )
 from aeroweaver_edge.vehicle.mavlink.stream import ZERO_VELOCITY, Setpoint, SetpointStream
 from aeroweaver_edge.vehicle.mavlink.udp import UdpUrl
+from aeroweaver_edge.wire import VehicleStatus
 
 if TYPE_CHECKING:
     from aeroweaver_edge.config import SafetyConfig, VehicleConfig
@@ -286,6 +287,23 @@ class MavlinkVehicle:
             armed=self.armed,
             in_air=self.in_air,
         )
+
+    def telemetry(self) -> VehicleStatus | None:
+        """Mode, armed, battery and heartbeat age as the link last heard them (observers)."""
+        loc: Message | None = self.link.last.get("LOCAL_POSITION_NED")
+        if loc is None:
+            return None
+        sys: Message | None = self.link.last.get("SYS_STATUS")
+        battery = None if sys is None or sys.battery_remaining < 0 else float(sys.battery_remaining)
+        hb = self.link.heartbeat
+        hb_age = None if hb is None else time.monotonic() - self.link.heartbeat_at
+        return VehicleStatus(
+            pos=(float(loc.x), float(loc.y), float(loc.z)),
+            vel=(float(loc.vx), float(loc.vy), float(loc.vz)),
+            armed=self.armed, in_air=self.in_air, mode=self.mode_name[:64],
+            battery_pct=battery,
+            heartbeat_age_s=None if hb_age is None else round(hb_age, 3),
+        )  # fmt: skip
 
     async def health(self) -> Health:
         if not self.link.alive:

@@ -112,3 +112,48 @@ async def test_console_in_chromium(tmp_path: Path) -> None:
     assert summary.stopped is not None
     assert summary.stopped.startswith("operator stop by")
     assert len(summary.episodes) < 30  # cut short by the stop
+
+
+async def test_the_page_outlives_a_sim_console_run(tmp_path: Path) -> None:
+    """``sim --console`` (``with_console``): when the run ends the server goes with it, but
+    the page shows ENDED, disables the stop button, keeps every frame and replays them."""
+    from aeroweaver_edge.console.server import with_console
+    from tests.helpers.zenoh_net import free_port
+
+    async_playwright = browser_or_skip()
+    port = free_port()
+    opts = SwarmOptions(task="coverage", selector="scripted", max_rounds=16, pace_s=0.3)
+    run: asyncio.Task[RunSummary] = asyncio.create_task(with_console(opts, "127.0.0.1", port))
+    try:
+        async with async_playwright() as pw:
+            ctx = await pw.chromium.launch_persistent_context(
+                str(tmp_path / "profile"), executable_path=str(CHROMIUM), args=FLAGS,
+                headless=True, viewport={"width": 1280, "height": 760},
+            )  # fmt: skip
+            page = ctx.pages[0] if ctx.pages else await ctx.new_page()
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            for _ in range(200):  # the console binds its port as the run starts
+                try:
+                    await page.goto(f"http://127.0.0.1:{port}/")
+                    break
+                except Exception:
+                    await asyncio.sleep(0.1)
+            await page.wait_for_function("window.__aw.frames.length >= 2", timeout=30_000)
+            assert await page.text_content("#mode") == "live"
+            await asyncio.wait_for(run, 60)
+            await page.wait_for_function(
+                "document.getElementById('mode').textContent === 'ended'", timeout=15_000
+            )
+            assert await page.is_disabled("#stop")
+            assert not await page.is_visible("#live")
+            seen = await page.evaluate("window.__aw.frames.length")
+            assert seen >= 10  # every round it saw stays (16 rounds, 0.3 s each)
+            await page.click("#play")  # replay from the first frame
+            await page.wait_for_function(
+                f"window.__aw.cur > window.__aw.base && window.__aw.cur < {seen - 1}"
+            )
+            assert errors == []
+            await ctx.close()
+    finally:
+        run.cancel()
