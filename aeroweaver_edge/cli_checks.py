@@ -13,7 +13,10 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlsplit
+
+from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from aeroweaver_edge.errors import UserError
 
@@ -49,6 +52,34 @@ def finite(*, minimum: float = 0.0, strict: bool = True) -> Callable[[str], floa
             rel = ">" if strict else ">="
             raise argparse.ArgumentTypeError(f"{value:g} must be {rel} {minimum:g}")
         return value
+
+    parse.__name__ = "number"
+    return parse
+
+
+def config_value(model: type[BaseModel], name: str) -> Callable[[str], Any]:
+    """An argparse type for a flag that sets config field ``model.name``: the field's own
+    type and bounds (``config.py``), so a flag and a config file refuse the same values."""
+    info = model.model_fields[name]
+    adapter: TypeAdapter[Any] = TypeAdapter(info.rebuild_annotation())
+    allow_nan = model.model_config.get("allow_inf_nan", True)
+
+    def parse(text: str) -> Any:
+        value: Any = text
+        try:
+            value = int(text)
+        except ValueError:
+            try:
+                value = float(text)
+            except ValueError:
+                raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if isinstance(value, float) and not allow_nan and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+        try:
+            return adapter.validate_python(value)
+        except ValidationError as exc:
+            why = exc.errors()[0]["msg"].removeprefix("Value error, ")
+            raise argparse.ArgumentTypeError(f"{text}: {why[:1].lower()}{why[1:]}") from None
 
     parse.__name__ = "number"
     return parse
