@@ -176,7 +176,9 @@ def test_the_daemon_refuses_with_one_line_and_exit_2(tmp_path: Path, line: str) 
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
     key = line.split("\n")[-1].split(" =")[0]
-    assert "config error" in lines[0] and key in lines[0] and "Traceback" not in proc.stderr
+    assert "config error" in lines[0]
+    assert key in lines[0]
+    assert "Traceback" not in proc.stderr
 
 
 @pytest.mark.parametrize(
