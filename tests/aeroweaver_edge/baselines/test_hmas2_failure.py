@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import pytest
 
@@ -28,7 +28,9 @@ async def failing() -> AsyncIterator[FakeProvider]:
         yield fp
 
 
-async def run(fp: FakeProvider, tmp: Path, baseline: str) -> tuple[dict[str, Any], float]:
+async def run(
+    fp: FakeProvider, tmp: Path, baseline: Literal["centralized", "hmas2"]
+) -> tuple[dict[str, Any], float]:
     trace = tmp / f"{baseline}.jsonl"
     opts = SwarmOptions(
         task="coverage", seed=3, max_rounds=ROUNDS, trace_path=trace, baseline=baseline,
@@ -44,7 +46,7 @@ async def run(fp: FakeProvider, tmp: Path, baseline: str) -> tuple[dict[str, Any
 
 @pytest.mark.parametrize("baseline", ["hmas2", "centralized"])
 async def test_a_failed_central_call_holds_every_uav_at_once_as_llm_failure(
-    failing: FakeProvider, tmp_path: Path, baseline: str
+    failing: FakeProvider, tmp_path: Path, baseline: Literal["centralized", "hmas2"]
 ) -> None:
     data, wall = await run(failing, tmp_path, baseline)
     assert wall < DEADLINE_S / 2  # no round waited out its deadline
