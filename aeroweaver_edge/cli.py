@@ -31,6 +31,7 @@ from aeroweaver_edge.cli_checks import (
     config_value,
     finite,
     int_in,
+    mission_text,
 )
 from aeroweaver_edge.cli_errors import ArgumentParser, report
 from aeroweaver_edge.cli_runner import Stopped
@@ -459,7 +460,10 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="benchmark task (default: coverage, or the mission's)",
     )
-    s.add_argument("--mission", help='natural-language mission, e.g. "Cover the three landmarks"')
+    s.add_argument(
+        "--mission", type=mission_text,
+        help='natural-language mission (UTF-8, at most 8 KiB), e.g. "Cover the three landmarks"',
+    )  # fmt: skip
     s.add_argument(
         "--uavs",
         type=int_in(1, MAX_UAVS),
@@ -564,7 +568,9 @@ def build_parser() -> argparse.ArgumentParser:
     m = sub.add_parser("mission", help="plan and run a mission on the daemons that are up")
     msub = m.add_subparsers(dest="mission_command", required=True)
     ms = msub.add_parser("start", help="parse, assign, publish and watch a mission")
-    ms.add_argument("text", help="the mission in natural language")
+    ms.add_argument(
+        "text", type=mission_text, help="the mission in natural language (UTF-8, at most 8 KiB)"
+    )
     ms.add_argument("--swarm", default="default")
     ms.add_argument("--connect", action="append", help="zenoh endpoint of a daemon or router")
     ms.add_argument("--listen", action="append", help="zenoh endpoint to listen on")

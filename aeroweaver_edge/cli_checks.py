@@ -85,6 +85,20 @@ def config_value(model: type[BaseModel], name: str) -> Callable[[str], Any]:
     return parse
 
 
+def mission_text(text: str) -> str:
+    """An argparse type: a mission text that passes ``commander.mission_text`` (UTF-8, no
+    control characters, at most 8 KiB), checked before any process or session starts."""
+    from commander.mission_text import MissionTextError, check_mission_text
+
+    try:
+        return check_mission_text(text)
+    except MissionTextError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+mission_text.__name__ = "mission text"
+
+
 def _nearest_existing(path: Path) -> Path:
     here = path
     while not here.exists() and here != here.parent:

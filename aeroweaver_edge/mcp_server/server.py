@@ -256,7 +256,7 @@ def build_server(service: SwarmService) -> MCPServer[Any]:
         start_mission(plan_id, confirm=...)."""
         try:
             return await service.plan(text)
-        except OperatorError as exc:
+        except UserError as exc:  # no UAV up, a mission that is too long or cannot be read
             return {"error": str(exc)}
 
     @server.tool()
