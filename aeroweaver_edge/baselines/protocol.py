@@ -100,7 +100,8 @@ class Mission:
 
 def _team_lines(asks: Sequence[CentralAsk]) -> list[str]:
     return [
-        f"- {a.uav}: role {a.role or '(unassigned)'}; goal: {a.local_goal.strip() or '(none)'}"
+        f"- {a.uav}: role {a.role or '(unassigned)'}; goal: "
+        f"{quote_data(a.local_goal, max_chars=300, multiline=False)}"
         for a in asks
     ]
 

@@ -196,3 +196,27 @@ def test_sim_flags_share_the_bounds(flag: str, value: str) -> None:
     assert proc.returncode == 2, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert flag in proc.stderr
+
+
+@pytest.mark.parametrize(
+    "endpoint",
+    ["tcp/127.0.0.1:99999", "tcp/127.0.0.1:-1", "tcp/127.0.0.1:http", "tcp/127.0.0.1",
+     "udp/:7447", "tcp/[::1]:65536"],
+)  # fmt: skip
+def test_an_endpoint_port_out_of_range_is_named(tmp_path: Path, endpoint: str) -> None:
+    path = tmp_path / "uav.toml"
+    path.write_text(f'uav = "uav0"\n[mesh]\nconnect = ["{endpoint}"]\n', encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"mesh\.connect\[0\]"):
+        load_config(path, UavConfig)
+
+
+def test_mission_start_refuses_a_port_beyond_65535() -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "aeroweaver_edge.cli", "mission", "start", "--no-llm",
+         "--connect", "tcp/127.0.0.1:99999", "Cover the landmarks"],
+        capture_output=True, text=True, timeout=60, env=env,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "port '99999'" in proc.stderr
