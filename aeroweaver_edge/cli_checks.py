@@ -78,8 +78,7 @@ def config_value(model: type[BaseModel], name: str) -> Callable[[str], Any]:
         try:
             return adapter.validate_python(value)
         except ValidationError as exc:
-            why = exc.errors()[0]["msg"].removeprefix("Value error, ")
-            raise argparse.ArgumentTypeError(f"{text}: {why[:1].lower()}{why[1:]}") from None
+            raise argparse.ArgumentTypeError(_bound_message(text, exc)) from None
 
     parse.__name__ = "number"
     return parse
@@ -97,6 +96,26 @@ def mission_text(text: str) -> str:
 
 
 mission_text.__name__ = "mission text"
+
+
+_BOUNDS = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<",
+           "less_than_equal": "<="}  # fmt: skip
+
+
+def _bound_message(text: str, exc: ValidationError) -> str:
+    """``-1 must be >= 0``, as the other argparse types say it."""
+    err = exc.errors()[0]
+    ctx = err.get("ctx") or {}
+    for kind, op in _BOUNDS.items():
+        if err["type"] == kind:
+            limit = next(iter(ctx.values()))
+            return f"{text} must be {op} {limit:g}" if isinstance(limit, float) else (
+                f"{text} must be {op} {limit}"
+            )  # fmt: skip
+    if err["type"] == "int_from_float":
+        return f"{text} is not a whole number"
+    why = str(err["msg"]).removeprefix("Value error, ")
+    return f"{text}: {why[:1].lower()}{why[1:]}"
 
 
 def _nearest_existing(path: Path) -> Path:
