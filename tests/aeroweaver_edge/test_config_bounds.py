@@ -112,6 +112,27 @@ CASES = [
 ]
 
 
+def models(model: type[BaseModel]) -> Iterator[type[BaseModel]]:
+    yield model
+    for info in model.model_fields.values():
+        sub = _model(info.annotation)
+        if sub is not None:
+            yield from models(sub)
+
+
+def test_the_walk_reaches_every_config_model() -> None:
+    """A section added to config.py but not reachable from the two files is caught here."""
+    import aeroweaver_edge.config as config
+
+    defined = {
+        obj for obj in vars(config).values()
+        if isinstance(obj, type) and issubclass(obj, BaseModel)
+        and obj.__module__ == config.__name__ and not obj.__name__.startswith("_")
+    }  # fmt: skip
+    reached = {m for top in (UavConfig, SimConfig) for m in models(top)}
+    assert defined == reached
+
+
 def test_the_walk_finds_the_fields_the_issue_names() -> None:
     found = {(s, n) for top in (UavConfig, SimConfig) for s, n, _ in numeric_fields(top)}
     for wanted in [("", "round_s"), ("mesh", "lease_ms"), ("mesh", "comm_radius_m"),
