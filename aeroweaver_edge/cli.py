@@ -28,16 +28,20 @@ from aeroweaver_edge.cli_checks import (
     check_output_file,
     check_skills,
     check_task,
+    config_value,
     finite,
     int_in,
+    mission_text,
 )
 from aeroweaver_edge.cli_errors import ArgumentParser, report
 from aeroweaver_edge.cli_runner import Stopped
 from aeroweaver_edge.cli_runner import run_until_signal as _run
 from aeroweaver_edge.config import (
     MAX_UAVS,
+    AgentConfig,
     LLMConfig,
     MeshConfig,
+    SimConfig,
     UavConfig,
     load_config,
     parse_config,
@@ -428,7 +432,10 @@ def _add_llm_flags(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--model", help="model name at that endpoint")
     p.add_argument("--api-key-env", help="name of the environment variable holding the API key")
-    p.add_argument("--llm-deadline", type=finite(), help="seconds per LLM decision (default 20)")
+    p.add_argument(
+        "--llm-deadline", type=config_value(LLMConfig, "deadline_s"),
+        help="seconds per LLM decision (default 20)",
+    )  # fmt: skip
 
 
 PROBE_EPILOG = (
@@ -453,23 +460,29 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="benchmark task (default: coverage, or the mission's)",
     )
-    s.add_argument("--mission", help='natural-language mission, e.g. "Cover the three landmarks"')
+    s.add_argument(
+        "--mission", type=mission_text,
+        help='natural-language mission (UTF-8, at most 8 KiB), e.g. "Cover the three landmarks"',
+    )  # fmt: skip
     s.add_argument(
         "--uavs",
         type=int_in(1, MAX_UAVS),
         default=None,
         help=f"UAVs we fly, 1..{MAX_UAVS} (default: the task's team, or the mission's)",
     )
-    s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--seed", type=config_value(SimConfig, "seed"), default=1)
     s.add_argument("--episodes", type=int_in(1), default=1)
     s.add_argument(
-        "--rounds", type=int_in(1), default=defaults.MAX_ROUNDS, help="horizon in rounds"
+        "--rounds",
+        type=config_value(SimConfig, "max_rounds"),
+        default=defaults.MAX_ROUNDS,
+        help="horizon in rounds",
     )
     s.add_argument("--processes", action="store_true", help="one OS process per daemon")
     s.add_argument("--selector", choices=["llm", "scripted"], default="llm")
     s.add_argument(
         "--beta",
-        type=finite(strict=False),
+        type=config_value(AgentConfig, "beta"),
         default=defaults.BETA,
         help="experience correction weight, >= 0 (0: plain)",
     )
@@ -492,7 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
     s.add_argument(
         "--deadline",
-        type=finite(),
+        type=config_value(SimConfig, "deadline_s"),
         default=defaults.DEADLINE_S,
         help="seconds a round may take (> 0)",
     )
@@ -527,7 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--console-host", default="127.0.0.1", help="console HTTP address")
     s.add_argument(
         "--pace",
-        type=finite(strict=False),
+        type=config_value(SimConfig, "pace_s"),
         default=None,
         metavar="SECONDS",
         help="wall-clock floor per round (default 0, or 0.5 with --console)",
@@ -555,7 +568,9 @@ def build_parser() -> argparse.ArgumentParser:
     m = sub.add_parser("mission", help="plan and run a mission on the daemons that are up")
     msub = m.add_subparsers(dest="mission_command", required=True)
     ms = msub.add_parser("start", help="parse, assign, publish and watch a mission")
-    ms.add_argument("text", help="the mission in natural language")
+    ms.add_argument(
+        "text", type=mission_text, help="the mission in natural language (UTF-8, at most 8 KiB)"
+    )
     ms.add_argument("--swarm", default="default")
     ms.add_argument("--connect", action="append", help="zenoh endpoint of a daemon or router")
     ms.add_argument("--listen", action="append", help="zenoh endpoint to listen on")
@@ -567,9 +582,11 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     ms.add_argument("--roster-wait", type=finite(), default=3.0, help="seconds to discover daemons")
     ms.add_argument("--sim-world", action="store_true", help="also run the kinematic world")
-    ms.add_argument("--seed", type=int, default=1)
+    ms.add_argument("--seed", type=config_value(SimConfig, "seed"), default=1)
     ms.add_argument("--episodes", type=int_in(1), default=1)
-    ms.add_argument("--rounds", type=int_in(1), default=defaults.MAX_ROUNDS)
+    ms.add_argument(
+        "--rounds", type=config_value(SimConfig, "max_rounds"), default=defaults.MAX_ROUNDS
+    )
     ms.add_argument("--no-llm", action="store_true", help="rule-based parsing and roles only")
     ms.add_argument(
         "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"

@@ -13,7 +13,10 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlsplit
+
+from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from aeroweaver_edge.errors import UserError
 
@@ -52,6 +55,67 @@ def finite(*, minimum: float = 0.0, strict: bool = True) -> Callable[[str], floa
 
     parse.__name__ = "number"
     return parse
+
+
+def config_value(model: type[BaseModel], name: str) -> Callable[[str], Any]:
+    """An argparse type for a flag that sets config field ``model.name``: the field's own
+    type and bounds (``config.py``), so a flag and a config file refuse the same values."""
+    info = model.model_fields[name]
+    adapter: TypeAdapter[Any] = TypeAdapter(info.rebuild_annotation())
+    allow_nan = model.model_config.get("allow_inf_nan", True)
+
+    def parse(text: str) -> Any:
+        value: Any = text
+        try:
+            value = int(text)
+        except ValueError:
+            try:
+                value = float(text)
+            except ValueError:
+                raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if isinstance(value, float) and not allow_nan and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+        try:
+            return adapter.validate_python(value)
+        except ValidationError as exc:
+            raise argparse.ArgumentTypeError(_bound_message(text, exc)) from None
+
+    parse.__name__ = "number"
+    return parse
+
+
+def mission_text(text: str) -> str:
+    """An argparse type: a mission text that passes ``commander.mission_text`` (UTF-8, no
+    control characters, at most 8 KiB), checked before any process or session starts."""
+    from commander.mission_text import MissionTextError, check_mission_text
+
+    try:
+        return check_mission_text(text)
+    except MissionTextError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+mission_text.__name__ = "mission text"
+
+
+_BOUNDS = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<",
+           "less_than_equal": "<="}  # fmt: skip
+
+
+def _bound_message(text: str, exc: ValidationError) -> str:
+    """``-1 must be >= 0``, as the other argparse types say it."""
+    err = exc.errors()[0]
+    ctx = err.get("ctx") or {}
+    for kind, op in _BOUNDS.items():
+        if err["type"] == kind:
+            limit = next(iter(ctx.values()))
+            return f"{text} must be {op} {limit:g}" if isinstance(limit, float) else (
+                f"{text} must be {op} {limit}"
+            )  # fmt: skip
+    if err["type"] == "int_from_float":
+        return f"{text} is not a whole number"
+    why = str(err["msg"]).removeprefix("Value error, ")
+    return f"{text}: {why[:1].lower()}{why[1:]}"
 
 
 def _nearest_existing(path: Path) -> Path:

@@ -1,7 +1,11 @@
 """Typed configuration for daemons, the Commander and the simulator.
 
 Every section is a pydantic model with ``extra="forbid"`` so a typo in a TOML file is an
-error naming the key, not a silently ignored setting.
+error naming the key, not a silently ignored setting. Every number is finite (``Finite``,
+and no section accepts inf/NaN) and bounded on both sides: TOML reads ``inf``, ``nan`` and
+2^63-1 as readily as 0.5, and an unbounded timeout, lease or radius is a silent "never"
+(``round_s = inf`` starts a daemon that never decides). The bounds are wide enough for any
+real deployment and are listed in docs/reliability.md.
 """
 
 from __future__ import annotations
@@ -10,9 +14,10 @@ import ipaddress
 import json
 import tomllib
 from pathlib import Path
-from typing import Any, Literal, Self, TypeVar
+from typing import Annotated, Any, Final, Literal, Self, TypeVar
 
 from pydantic import (
+    AllowInfNan,
     BaseModel,
     ConfigDict,
     Field,
@@ -38,6 +43,21 @@ ALTITUDE_LIMIT_M = 1_500.0  # altitude band within 0 .. 1500 m
 MAX_SPEED_LIMIT_MPS = 60.0  # speed cap within (0, 60] m/s
 SEPARATION_RANGE_M = (0.5, 100.0)  # minimum separation within 0.5 .. 100 m
 
+Finite = Annotated[float, AllowInfNan(False)]
+"""A float that is a number: inf and NaN are refused wherever a config holds one."""
+
+# Upper bounds shared by many fields: generous for any real deployment, yet finite.
+MAX_WAIT_S: Final = 3600.0  # any timeout, deadline, lease or grace: an hour at most
+MAX_ROUND_S: Final = 60.0  # one decision round (the paper's is 0.5 s)
+MAX_RANGE_M: Final = 100_000.0  # any radius or range (sensing, communication): 100 km
+MAX_ROUNDS: Final = 100_000  # an episode's horizon
+MAX_SEED: Final = 2**32 - 1  # what every random generator takes
+MAX_BETA: Final = 100.0  # the experience correction weight (paper: 0.8)
+MAX_NEIGHBOURHOOD: Final = 4096  # experience records retrieved per decision
+MAX_SLOT: Final = 1023  # llama-server cache slots
+MAX_LEASE_MS: Final = 600_000  # Zenoh link lease: 10 minutes
+MAX_EXTRA_BODY_CHARS: Final = 16_384  # [llm] extra_body, as JSON
+
 
 def _check_id(value: str, what: str) -> str:
     if not value or not set(value) <= _ID_CHARS or value[0] == "@":
@@ -53,7 +73,8 @@ def check_id(value: str, what: str) -> str:
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # allow_inf_nan=False: a float field without ``Finite`` is still refused inf/NaN.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class SecurityConfig(_Section):
@@ -102,6 +123,22 @@ def endpoint_is_loopback(endpoint: str) -> bool:
         return False  # a host name: it may resolve anywhere
 
 
+_PORT_PROTOCOLS = frozenset({"tcp", "udp", "tls", "quic", "ws"})
+
+
+def _port_problem(proto: str, address: str) -> str | None:
+    """What is wrong with the ``host:port`` of an IP endpoint (``None``: nothing)."""
+    if proto not in _PORT_PROTOCOLS:
+        return None
+    hostport = address.split("#", 1)[0].split("?", 1)[0]
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not host.strip("[]"):
+        return "no host:port (e.g. tcp/127.0.0.1:7447)"
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        return f"port {port!r} is not a number in 0..65535"
+    return None
+
+
 _PROTECTED_OVERRIDES = ("transport/link/tls", "access_control", "transport/auth")
 
 
@@ -114,8 +151,8 @@ class MeshConfig(_Section):
     gossip: bool = True
     multicast: bool = False
     namespace: str | None = None
-    lease_ms: int = Field(default=10_000, ge=500)
-    comm_radius_m: float = Field(default=d.COMM_RADIUS_M, gt=0)
+    lease_ms: int = Field(default=10_000, ge=500, le=MAX_LEASE_MS)
+    comm_radius_m: Finite = Field(default=d.COMM_RADIUS_M, gt=0, le=MAX_RANGE_M)
     # Raw zenoh config overrides, path -> JSON5 value, applied last (escape hatch).
     zenoh_overrides: dict[str, str] = Field(default_factory=dict)
     security: SecurityConfig | None = None
@@ -135,6 +172,9 @@ class MeshConfig(_Section):
                         f"mesh.{where}: not a Zenoh endpoint (expected proto/address, "
                         "e.g. tcp/127.0.0.1:7447 or tls/10.0.0.2:7447)"
                     )
+                why = _port_problem(proto, address)
+                if why is not None:
+                    raise ValueError(f"mesh.{where}: {why}")
                 if self.security is not None and not endpoint_is_secure(ep):
                     raise ValueError(
                         f"{where}: with [mesh.security] every endpoint is tls/ or quic/"
@@ -162,16 +202,30 @@ class LLMConfig(_Section):
     model: str = "smollm2-135m-instruct"
     api_key_env: str | None = None
     extra_body: dict[str, Any] = Field(default_factory=dict)
-    deadline_s: float = Field(default=20.0, gt=0)
-    connect_timeout_s: float = Field(default=2.0, gt=0)
+    deadline_s: Finite = Field(default=20.0, gt=0, le=MAX_WAIT_S)
+    connect_timeout_s: Finite = Field(default=2.0, gt=0, le=MAX_WAIT_S)
     retries: int = Field(default=1, ge=0, le=5)
-    breaker_failures: int = Field(default=3, ge=1)
-    breaker_reset_s: float = Field(default=10.0, gt=0)
+    breaker_failures: int = Field(default=3, ge=1, le=1000)
+    breaker_reset_s: Finite = Field(default=10.0, gt=0, le=MAX_WAIT_S)
     top_logprobs: int = Field(default=20, ge=1, le=20)
-    temperature: float = Field(default=0.0, ge=0)
+    temperature: Finite = Field(default=0.0, ge=0, le=2.0)  # OpenAI's range
     # llama-server cache slot this daemon's decisions pin to (sent as ``id_slot``), so its
     # prompt prefix stays in its own KV cache. None: let the server choose (hosted APIs).
-    slot: int | None = Field(default=None, ge=0)
+    slot: int | None = Field(default=None, ge=0, le=MAX_SLOT)
+
+    @field_validator("extra_body")
+    @classmethod
+    def _extra_body(cls, value: dict[str, Any]) -> dict[str, Any]:
+        """Goes into every request body as JSON: no inf/NaN (invalid JSON), bounded size."""
+        try:
+            text = json.dumps(value, allow_nan=False)
+        except ValueError:
+            raise ValueError("holds inf or nan, which JSON cannot carry") from None
+        except (TypeError, RecursionError):
+            raise ValueError("is not plain JSON data") from None
+        if len(text) > MAX_EXTRA_BODY_CHARS:
+            raise ValueError(f"is {len(text)} characters as JSON, at most {MAX_EXTRA_BODY_CHARS}")
+        return value
 
 
 class AgentConfig(_Section):
@@ -180,9 +234,9 @@ class AgentConfig(_Section):
     # llm: this UAV's own LLM; scripted: the task's reference policy; centralized / hmas2:
     # a baseline's central node decides (aeroweaver_edge.baselines), the UAV still executes.
     selector: Literal["llm", "scripted", "centralized", "hmas2"] = "llm"
-    beta: float = Field(default=d.BETA, ge=0)
-    gamma: float = Field(default=d.GAMMA, ge=0, le=1)
-    neighbourhood: int = Field(default=d.NEIGHBOURHOOD, ge=1)
+    beta: Finite = Field(default=d.BETA, ge=0, le=MAX_BETA)
+    gamma: Finite = Field(default=d.GAMMA, ge=0, le=1)
+    neighbourhood: int = Field(default=d.NEIGHBOURHOOD, ge=1, le=MAX_NEIGHBOURHOOD)
     memory_path: str | None = None  # None: in-memory SQLite (lost on exit)
     # A configured memory that cannot be opened or written stops the daemon with a clear
     # error; false: it runs on with memory in RAM / dropped writes (and says so in the log).
@@ -219,11 +273,11 @@ class SafetyConfig(_Section):
     # NaN/inf would silently open the envelope (``max(x, nan)`` is ``x``; ``inf`` is no cap).
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    geofence_north_m: tuple[float, float] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
-    geofence_east_m: tuple[float, float] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
-    altitude_band_m: tuple[float, float] = (2.0, 60.0)
-    max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0, le=MAX_SPEED_LIMIT_MPS)
-    min_separation_m: float = Field(
+    geofence_north_m: tuple[Finite, Finite] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
+    geofence_east_m: tuple[Finite, Finite] = (-d.ARENA_HALF_M, d.ARENA_HALF_M)
+    altitude_band_m: tuple[Finite, Finite] = (2.0, 60.0)
+    max_speed_mps: Finite = Field(default=d.MAX_SPEED_MPS, gt=0, le=MAX_SPEED_LIMIT_MPS)
+    min_separation_m: Finite = Field(
         default=d.MIN_SEPARATION_M, ge=SEPARATION_RANGE_M[0], le=SEPARATION_RANGE_M[1]
     )
 
@@ -258,27 +312,27 @@ class VehicleConfig(_Section):
     # mavlink: udpin://0.0.0.0:14540 (the autopilot sends to us) or udpout://HOST:PORT;
     # mavsdk: any MAVSDK connection URL (udpin://, udpout://, tcpout://, serial://).
     url: str | None = None
-    altitude_m: float = Field(default=d.ALTITUDE_M, gt=0, le=120)  # mission flight level (take-off)
+    altitude_m: Finite = Field(default=d.ALTITUDE_M, gt=0, le=120)  # flight level (take-off)
     personality: Literal["auto", "px4", "ardupilot"] = "auto"  # auto: from the heartbeat
     sysid: int | None = Field(default=None, ge=1, le=255)  # None: from the vehicle heartbeat
     signing_key: str | None = None  # MAVLink 2 key file (0600); timestamp kept beside it
-    setpoint_hz: float = Field(default=20.0, ge=10.0, le=100.0)
-    lease_s: float = Field(default=2.0, gt=0, le=120.0)  # agent silence before autopilot hold
-    link_timeout_s: float = Field(default=2.5, ge=1.5, le=10.0)  # tolerates one lost 1 Hz heartbeat
-    connect_timeout_s: float = Field(default=15.0, gt=0)
-    command_timeout_s: float = Field(default=0.5, gt=0, le=10.0)  # per try, before a retry
+    setpoint_hz: Finite = Field(default=20.0, ge=10.0, le=100.0)
+    lease_s: Finite = Field(default=2.0, gt=0, le=120.0)  # agent silence before autopilot hold
+    link_timeout_s: Finite = Field(default=2.5, ge=1.5, le=10.0)  # one lost 1 Hz heartbeat is ok
+    connect_timeout_s: Finite = Field(default=15.0, gt=0, le=MAX_WAIT_S)
+    command_timeout_s: Finite = Field(default=0.5, gt=0, le=10.0)  # per try, before a retry
     command_retries: int = Field(default=4, ge=0, le=10)
     failsafe_policy: Literal["warn", "refuse"] = "refuse"  # autopilot failsafe check at connect
     upload_fence: bool = True  # the safety geofence, uploaded as the autopilot's fence
     end_action: Literal["land", "return"] = "land"  # at mission end or operator stop
     on_link_loss: Literal["failsafe", "land", "return"] = "failsafe"  # when the link is back
-    takeoff_timeout_s: float = Field(default=60.0, gt=0)
+    takeoff_timeout_s: Finite = Field(default=60.0, gt=0, le=MAX_WAIT_S)
     # Clock, perception and rewards from the simulated world (lockstep) while the vehicle
     # flies over MAVLink/MAVSDK: ``aeroweaver sim --link mavlink``. Always on for "sim".
     sim_world: bool = False
     # A daemon flying in the simulated world holds when the world's liveliness token goes
     # and stops if it is not back within this grace (a partition shorter than this heals).
-    world_grace_s: float = Field(default=10.0, gt=0, le=3600.0)
+    world_grace_s: Finite = Field(default=10.0, gt=0, le=MAX_WAIT_S)
 
     @model_validator(mode="after")
     def _link(self) -> VehicleConfig:
@@ -309,7 +363,7 @@ class ApprovalConfig(_Section):
     level: Literal["normal", "strict"] = "normal"
     # Identities whose approvals count (their signatures are checked when the mesh is secured).
     approvers: list[str] = Field(default_factory=lambda: ["operator"], min_length=1, max_length=16)
-    max_ttl_s: float = Field(default=3600.0, gt=0, le=86_400)  # longer approvals are cut to this
+    max_ttl_s: Finite = Field(default=3600.0, gt=0, le=86_400)  # longer approvals are cut to this
 
     @field_validator("approvers")
     @classmethod
@@ -324,8 +378,8 @@ class FieldPoint(_Section):
 
     id: str = Field(min_length=1, max_length=64)
     kind: Literal["landmark", "waypoint"] = "waypoint"
-    north: float = Field(ge=-10_000, le=10_000)
-    east: float = Field(ge=-10_000, le=10_000)
+    north: Finite = Field(ge=-GEOFENCE_LIMIT_M, le=GEOFENCE_LIMIT_M)
+    east: Finite = Field(ge=-GEOFENCE_LIMIT_M, le=GEOFENCE_LIMIT_M)
 
 
 class FieldConfig(_Section):
@@ -333,9 +387,9 @@ class FieldConfig(_Section):
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    round_deadline_s: float = Field(default=25.0, gt=0)  # an LLM round may take this long
-    sensing_radius_m: float = Field(default=d.SENSING_RADIUS_M, gt=0)
-    beacon_max_age_s: float = Field(default=3.0, gt=0)  # by local receipt time
+    round_deadline_s: Finite = Field(default=25.0, gt=0, le=MAX_WAIT_S)  # an LLM round's time
+    sensing_radius_m: Finite = Field(default=d.SENSING_RADIUS_M, gt=0, le=MAX_RANGE_M)
+    beacon_max_age_s: Finite = Field(default=3.0, gt=0, le=MAX_WAIT_S)  # by local receipt time
     points: list[FieldPoint] = Field(default_factory=list, max_length=256)
 
 
@@ -344,8 +398,8 @@ class UavConfig(_Section):
 
     uav: str
     swarm: str = "default"
-    index: int | None = Field(default=None, ge=0)  # None: the trailing digits of the id
-    round_s: float = Field(default=d.ROUND_S, gt=0)
+    index: int | None = Field(default=None, ge=0, le=65_535)  # None: the id's trailing digits
+    round_s: Finite = Field(default=d.ROUND_S, gt=0, le=MAX_ROUND_S)
     mesh: MeshConfig = MeshConfig()
     llm: LLMConfig = LLMConfig()
     agent: AgentConfig = AgentConfig()
@@ -377,17 +431,17 @@ class SimConfig(_Section):
 
     task: str = "coverage"
     uavs: int = Field(default=3, ge=1, le=MAX_UAVS)
-    seed: int = 1
-    max_rounds: int = Field(default=d.MAX_ROUNDS, ge=1)
-    round_s: float = Field(default=d.ROUND_S, gt=0)
-    deadline_s: float = Field(default=d.DEADLINE_S, gt=0)
-    sensing_radius_m: float = Field(default=d.SENSING_RADIUS_M, gt=0)
-    altitude_m: float = Field(default=d.ALTITUDE_M, gt=0)
-    max_speed_mps: float = Field(default=d.MAX_SPEED_MPS, gt=0)
-    max_accel_mps2: float = Field(default=d.MAX_ACCEL_MPS2, gt=0)
+    seed: int = Field(default=1, ge=0, le=MAX_SEED)
+    max_rounds: int = Field(default=d.MAX_ROUNDS, ge=1, le=MAX_ROUNDS)
+    round_s: Finite = Field(default=d.ROUND_S, gt=0, le=MAX_ROUND_S)
+    deadline_s: Finite = Field(default=d.DEADLINE_S, gt=0, le=MAX_WAIT_S)
+    sensing_radius_m: Finite = Field(default=d.SENSING_RADIUS_M, gt=0, le=MAX_RANGE_M)
+    altitude_m: Finite = Field(default=d.ALTITUDE_M, gt=0, le=ALTITUDE_LIMIT_M)
+    max_speed_mps: Finite = Field(default=d.MAX_SPEED_MPS, gt=0, le=MAX_SPEED_LIMIT_MPS)
+    max_accel_mps2: Finite = Field(default=d.MAX_ACCEL_MPS2, gt=0, le=1000.0)
     # Wall-clock floor per round (0: as fast as the daemons decide). The console sets the
     # paper's 0.5 s so a scripted run can be watched; results do not depend on it.
-    pace_s: float = Field(default=0.0, ge=0, le=60)
+    pace_s: Finite = Field(default=0.0, ge=0, le=60)
 
 
 class ConfigError(UserError):

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 from aeroweaver_edge.actions import HOLD, Intent, VehicleAction
 from aeroweaver_edge.agent.candidates import CandidateSet, build_candidates
 from aeroweaver_edge.agent.describe import describe
+from aeroweaver_edge.agent.prompt import option_text
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.agent.state_text import state_text as make_state_text
 from aeroweaver_edge.config import AgentConfig
@@ -263,7 +264,7 @@ async def _decide_and_act(
     scores = await rc.selector.score(request)
     advantages = await _advantages(rc, view, state_text, cs)
     choice = choose(scores, cs.labels, advantages, rc.agent.beta)
-    options = tuple(f"{c.label}. {c.text}" for c in cs.candidates)
+    options = tuple(f"{c.label}. {option_text(c)}" for c in cs.candidates)  # as prompted
     if choice.label is None:
         await rc.vehicle.hold()
         cause: HoldCause = "llm_failure" if scores.error is not None else "invalid_answer"

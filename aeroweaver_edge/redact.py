@@ -2,12 +2,16 @@
 
 An operator may put a key in a base URL (``https://user:key@host/v1`` or
 ``...?api_key=...``). Anything that prints or logs a URL goes through ``redact_url``;
-free text that may embed one (exception messages) goes through ``redact_text``.
+free text that may embed one (exception messages) goes through ``redact_text``. Libraries
+log URLs themselves (httpx: every request at INFO, shown under ``-v``), so their loggers
+carry ``RedactingFilter``, which also masks the literal secrets clients registered.
 """
 
 from __future__ import annotations
 
+import logging
 import re
+import threading
 from typing import Final
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
@@ -78,3 +82,47 @@ def scrub(text: str, secrets: list[str]) -> str:
     for secret in sorted(secrets, key=len, reverse=True):
         text = text.replace(secret, MASK)
     return text
+
+
+_registered: set[str] = set()
+_lock = threading.Lock()
+
+HTTP_LOGGERS: Final = (
+    "httpx", "httpcore", "httpcore.connection", "httpcore.http11", "httpcore.http2",
+    "httpcore.proxy", "httpcore.socks", "hpack", "urllib3", "urllib3.connectionpool",
+)  # fmt: skip
+"""Loggers of the HTTP libraries (a logger filter sees only its own logger's records)."""
+
+
+def register_secrets(secrets: list[str]) -> None:
+    """Literal secrets (API keys, URL passwords) every filtered log line masks."""
+    with _lock:
+        _registered.update(s for s in secrets if len(s) >= 4)
+
+
+class RedactingFilter(logging.Filter):
+    """Formats the record once and replaces it by its redacted text (URLs with user info or
+    secret query values masked, registered secrets masked). Never drops a record."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        try:
+            message = record.getMessage()
+        except Exception:  # a broken format string: leave it to logging's own handling
+            return True
+        with _lock:
+            secrets = list(_registered)
+        cleaned = scrub(message, secrets)
+        if cleaned != message or record.args:
+            record.msg, record.args = cleaned, None
+        return True
+
+
+_FILTER = RedactingFilter()
+
+
+def install_log_redaction(names: tuple[str, ...] = HTTP_LOGGERS) -> None:
+    """Put ``RedactingFilter`` on the HTTP libraries' loggers (idempotent)."""
+    for name in names:
+        logger = logging.getLogger(name)
+        if _FILTER not in logger.filters:
+            logger.addFilter(_FILTER)

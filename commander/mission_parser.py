@@ -30,6 +30,7 @@ from aeroweaver_edge.defaults import ARENA_HALF_M
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
 from aeroweaver_edge.tasks import get_spec, specs
+from commander.mission_text import check_mission_text
 from commander.retrieval import BM25Index
 from commander.task_record import TASK_TYPES, TaskRecord, validation_summary
 
@@ -526,7 +527,9 @@ class ParseOutcome:
 async def parse_mission(
     text: str, roster: Sequence[str], client: ChatClient | None = None
 ) -> ParseOutcome:
-    """LLM when a client is given, else (or on any LLM problem) the rules."""
+    """LLM when a client is given, else (or on any LLM problem) the rules. The text is
+    checked first (``mission_text``: UTF-8, no control characters, at most 8 KiB)."""
+    text = check_mission_text(text)
     if client is None:
         return ParseOutcome(
             parse_fallback(text, roster),

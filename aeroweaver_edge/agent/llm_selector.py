@@ -12,7 +12,9 @@ How logprobs are used follows the endpoint probe (``llm.probe``):
 * no verdict (``unreachable``, ``timeout``, ``auth``, ... or no probe) — unknown: the first
   real answer decides the class, so an endpoint that was down at start-up is not stuck
   without correction. A 400/422 while the class is unknown is retried once without logprob
-  parameters: only if that answers were logprobs the cause (``rejected``); a refusal that
+  parameters: only if that answers were logprobs the cause, and only a refusal that names
+  them or repeats decides ``rejected`` (``probe.refusal_verdict``; one transient 400 must
+  not switch them off for the session, that round uses the text label); a refusal that
   stays (context length, wrong model) is an LLM failure of that round and decides nothing.
 """
 
@@ -31,7 +33,7 @@ from aeroweaver_edge.llm.probe import (
     ProbeResult,
     classify_response,
     may_be_logprobs,
-    refused_logprobs,
+    refusal_verdict,
 )
 from aeroweaver_edge.ports import DecisionRequest
 from aeroweaver_edge.scores import LabelScores
@@ -64,6 +66,7 @@ class LLMSelector:
         self._owns_client = owns_client
         self._limits = limits
         self.agent = agent  # ledger name; default: the observing UAV's id
+        self._refusals = 0  # unexplained logprob refusals so far (see refusal_verdict)
         if probe_result is not None and not probe_result.ok:
             log.warning("%s", probe_result.line())  # says: correction off, text label
 
@@ -138,7 +141,10 @@ class LLMSelector:
                     result = await self.client.chat(messages, tag=tag, **plain)
                 except LLMError:
                     return self._failed(exc)  # refused either way: not about logprobs
-                self._settle(replace(refused_logprobs(exc), model=self.client.model))
+                verdict = refusal_verdict(exc, self._refusals)
+                self._refusals += 1
+                if verdict is not None:
+                    self._settle(replace(verdict, model=self.client.model))
                 params = plain
         except Exception as exc:  # never into the round loop
             log.exception("LLM selector failed unexpectedly")

@@ -3,11 +3,13 @@
 ``score`` puts this round's ``CentralAsk`` (observation text, received messages, lettered
 options) on the UAV's own key and waits for the central node's final answer for this
 (episode, round). With HMAS-2 it first gets a proposal, reviews it with one local LLM call
-(its own client, its own cache slot) and puts its ``CentralReview``. The final letter comes
-back as a text label (no logprobs, so the experience correction is off, as the baselines
-have no reward memory); a missing or invalid letter is an invalid answer and the UAV holds,
-a central call that failed is an LLM failure. The round's deadline bounds the wait (the
-round is cancelled and the UAV holds).
+(its own client, its own cache slot) and puts its ``CentralReview``; when the central plan
+call failed there is no proposal, only the final answer carrying the error, which ends the
+wait at once (an ``llm_failure`` hold now, not a ``deadline`` hold a round later). The
+final letter comes back as a text label (no logprobs, so the experience correction is off,
+as the baselines have no reward memory); a missing or invalid letter is an invalid answer
+and the UAV holds, a central call that failed is an LLM failure. The round's deadline bounds
+the wait (the round is cancelled and the UAV holds).
 
 Tokens of the local review are reported with the round they were spent in; if the round's
 deadline cut the wait after the review, they go out with the next round instead, so totals
@@ -99,11 +101,12 @@ class RemoteSelector:
                     del self._answers[k]
                 self._arrived.notify_all()
 
-    async def _wait(self, episode: int, rnd: int, phase: str) -> CentralAnswer:
-        key = (episode, rnd, phase)
+    async def _wait(self, episode: int, rnd: int, *phases: str) -> CentralAnswer:
+        """The first of ``phases`` (in that order of preference) to arrive for the round."""
+        keys = [(episode, rnd, phase) for phase in phases]
         async with self._arrived:
-            await self._arrived.wait_for(lambda: key in self._answers)
-            return self._answers.pop(key)
+            await self._arrived.wait_for(lambda: any(k in self._answers for k in keys))
+            return self._answers.pop(next(k for k in keys if k in self._answers))
 
     def _ask(self, request: DecisionRequest) -> CentralAsk:
         obs = request.observation
@@ -123,6 +126,22 @@ class RemoteSelector:
             options=[f"{c.label}. {option_text(c)}" for c in request.candidates],
         )
 
+    async def _review(self, request: DecisionRequest, proposed: str | None) -> tuple[int, int, int]:
+        """HMAS-2's local review of the proposal, put on the UAV's key; its tokens."""
+        obs = request.observation
+        review, ans = await local_review(
+            self.client, self._json, request, proposed, agent=self.uav, slot=self.review_slot
+        )
+        self.mesh.put(
+            self.keys.review(self.uav),
+            CentralReview(
+                h=self.headers.next(), uav=self.uav, episode=obs.episode, round=obs.round,
+                agree=review.agree, suggest=review.choice, error=ans.error,
+            ),
+            block=True,
+        )  # fmt: skip
+        return ans.prompt_tokens, ans.cached_tokens, ans.completion_tokens
+
     async def score(self, request: DecisionRequest) -> LabelScores:
         if not request.candidates:
             return LabelScores(logprobs={}, error="no candidates to choose from")
@@ -130,31 +149,15 @@ class RemoteSelector:
         self.mesh.put(self.keys.ask(self.uav), self._ask(request), block=True)
         spent = (0, 0, 0)
         try:
+            final: CentralAnswer | None = None
             if self.mode == "hmas2":
-                proposal = await self._wait(obs.episode, obs.round, "proposal")
-                review, ans = await local_review(
-                    self.client,
-                    self._json,
-                    request,
-                    proposal.label,
-                    agent=self.uav,
-                    slot=self.review_slot,
-                )
-                spent = (ans.prompt_tokens, ans.cached_tokens, ans.completion_tokens)
-                self.mesh.put(
-                    self.keys.review(self.uav),
-                    CentralReview(
-                        h=self.headers.next(),
-                        uav=self.uav,
-                        episode=obs.episode,
-                        round=obs.round,
-                        agree=review.agree,
-                        suggest=review.choice,
-                        error=ans.error,
-                    ),
-                    block=True,
-                )
-            final = await self._wait(obs.episode, obs.round, "final")
+                first = await self._wait(obs.episode, obs.round, "final", "proposal")
+                if first.phase == "final":  # the plan call failed: no proposal is coming
+                    final = first
+                else:
+                    spent = await self._review(request, first.label)
+            if final is None:
+                final = await self._wait(obs.episode, obs.round, "final")
         except asyncio.CancelledError:
             self._carry = tuple(a + b for a, b in zip(self._carry, spent, strict=True))  # type: ignore[assignment]
             raise

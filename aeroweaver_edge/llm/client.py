@@ -11,6 +11,7 @@ agent, role and episode are plain sums.
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import os
 import random
@@ -24,11 +25,24 @@ from urllib.parse import urlsplit, urlunsplit
 import httpx
 
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.redact import redact_url, scrub, url_secrets
+from aeroweaver_edge.redact import (
+    install_log_redaction,
+    redact_url,
+    register_secrets,
+    scrub,
+    url_secrets,
+)
 
 log = logging.getLogger(__name__)
+install_log_redaction()  # httpx logs every request URL at INFO (-v): never its secrets
 
 _EXCERPT = 240
+MAX_BODY_BYTES = 4 * 1024 * 1024
+"""Largest answer body read: a chat completion with 20 top logprobs per token and a few
+hundred tokens is tens of KB; a body beyond this is refused as a bad response while it
+streams in, never held whole in memory."""
+MAX_ERROR_BYTES = 64 * 1024
+"""Of an error answer only the start is read (its excerpt goes into the message)."""
 
 
 # --------------------------------------------------------------------------- errors
@@ -310,8 +324,17 @@ class _Retryable(Exception):
         self.retry_after = retry_after
 
 
-def _retry_after(response: httpx.Response) -> float | None:
-    value = response.headers.get("retry-after")
+def _parse_json(data: bytes) -> Any:
+    """The JSON value of ``data``; ``None`` when it is not JSON, including a document nested
+    so deep that the decoder gives up (``RecursionError``): a bad answer, not a crash."""
+    try:
+        return json.loads(data)
+    except (ValueError, RecursionError):
+        return None
+
+
+def _retry_after(headers: httpx.Headers) -> float | None:
+    value = headers.get("retry-after")
     try:
         return max(0.0, float(value)) if value is not None else None
     except ValueError:
@@ -376,6 +399,7 @@ class ChatClient:
                 )
             headers["Authorization"] = f"Bearer {key}"
             self._secrets.append(key)
+        register_secrets(self._secrets)  # the log filter masks them in any library's lines
         self._http = httpx.AsyncClient(
             base_url=http_base,
             headers=headers,
@@ -518,11 +542,8 @@ class ChatClient:
     async def _post_once(self, body: dict[str, Any], deadline: float) -> dict[str, Any]:
         self.requests_sent += 1
         try:
-            response = await self._http.post(
-                "/chat/completions",
-                json=body,
-                params=self._query or None,
-                timeout=self._timeout(deadline),
+            status, headers, data, whole = await self._post(
+                "/chat/completions", body, self._timeout(deadline)
             )
         except (httpx.ConnectError, httpx.ConnectTimeout) as exc:
             raise _Retryable(
@@ -538,34 +559,63 @@ class ChatClient:
                 f"{type(exc).__name__}: {self._scrub(str(exc))}",
                 self.endpoint,
             ) from None
-        if response.status_code >= 300:
-            text = self._scrub(_excerpt(response.text))
+        text = data.decode("utf-8", errors="replace")
+        if status >= 300:
+            excerpt = self._scrub(_excerpt(text))
             err = LLMHTTPError(
-                f"HTTP {response.status_code} from {self.endpoint}: {text}",
-                self.endpoint,
-                response.status_code,
-                text,
+                f"HTTP {status} from {self.endpoint}: {excerpt}", self.endpoint, status, excerpt
             )
-            if response.status_code == 429 or response.status_code >= 500:
-                raise _Retryable(err, _retry_after(response))
+            if status == 429 or status >= 500:
+                raise _Retryable(err, _retry_after(headers))
             raise err
-        try:
-            raw = response.json()
-        except ValueError:
+        if not whole:
             raise LLMBadResponse(
-                f"non-JSON answer from {self.endpoint}: "
-                f"{self._scrub(_excerpt(response.text, 120))}",
+                f"answer from {self.endpoint} is over {MAX_BODY_BYTES // 1024 // 1024} MB "
+                "(no chat completion is that large); not read further",
                 self.endpoint,
-            ) from None
+            )
+        raw = _parse_json(data)
+        if raw is None:
+            raise LLMBadResponse(
+                f"non-JSON (or absurdly nested JSON) answer from {self.endpoint}: "
+                f"{self._scrub(_excerpt(text, 120))}",
+                self.endpoint,
+            )
         choices = raw.get("choices") if isinstance(raw, dict) else None
         if not isinstance(choices, list) or not choices or not isinstance(choices[0], dict):
             raise LLMBadResponse(
-                f"answer from {self.endpoint} has no choices: "
-                f"{self._scrub(_excerpt(response.text, 120))}",
+                f"answer from {self.endpoint} has no choices: {self._scrub(_excerpt(text, 120))}",
                 self.endpoint,
             )
         out: dict[str, Any] = raw
         return out
+
+    async def _post(
+        self, url: str, body: dict[str, Any], http_timeout: httpx.Timeout | None = None
+    ) -> tuple[int, httpx.Headers, bytes, bool]:
+        """POST ``body``; (status, headers, the body's first bytes, whether that is all of
+        it). The body streams in and reading stops at the cap (``MAX_BODY_BYTES``, or
+        ``MAX_ERROR_BYTES`` for an error status), so a huge answer costs no memory."""
+        request = self._http.build_request(
+            "POST", url, json=body, params=self._query or None,
+            timeout=http_timeout if http_timeout is not None else self._http.timeout,
+        )  # fmt: skip
+        response = await self._http.send(request, stream=True)
+        try:
+            cap = MAX_ERROR_BYTES if response.status_code >= 300 else MAX_BODY_BYTES
+            declared = response.headers.get("content-length", "")
+            if declared.isdigit() and int(declared) > cap:
+                return response.status_code, response.headers, b"", False
+            chunks: list[bytes] = []
+            size = 0
+            async for chunk in response.aiter_bytes():  # decoded: a gzip bomb counts in full
+                chunks.append(chunk)
+                size += len(chunk)
+                if size > cap:
+                    return response.status_code, response.headers, b"".join(chunks)[:cap], False
+            return response.status_code, response.headers, b"".join(chunks), True
+        finally:
+            await response.aclose()
 
     def _journal(
         self,
@@ -607,8 +657,8 @@ class ChatClient:
         url = f"{self.server_root}/tokenize"
         try:
             async with asyncio.timeout(self.deadline_s):
-                response = await self._http.post(
-                    url, json={"content": text, "add_special": False}, params=self._query or None
+                status, _headers, data, whole = await self._post(
+                    url, {"content": text, "add_special": False}
                 )
         except TimeoutError:
             raise LLMTimeout(f"/tokenize at {self.endpoint} timed out", self.endpoint) from None
@@ -616,19 +666,17 @@ class ChatClient:
             raise LLMUnreachable(
                 f"cannot reach /tokenize at {self.endpoint}: {type(exc).__name__}", self.endpoint
             ) from None
-        if 400 <= response.status_code < 500:
+        if 400 <= status < 500:
             return None
-        if response.status_code >= 300:
+        if status >= 300:
             raise LLMHTTPError(
-                f"HTTP {response.status_code} from /tokenize at {self.endpoint}",
+                f"HTTP {status} from /tokenize at {self.endpoint}",
                 self.endpoint,
-                response.status_code,
-                _excerpt(response.text),
+                status,
+                self._scrub(_excerpt(data.decode("utf-8", errors="replace"))),
             )
-        try:
-            tokens = response.json().get("tokens")
-        except (ValueError, AttributeError):
-            tokens = None
+        parsed = _parse_json(data) if whole else None
+        tokens = parsed.get("tokens") if isinstance(parsed, dict) else None
         if not isinstance(tokens, list):
             raise LLMBadResponse(f"/tokenize at {self.endpoint} gave no token list", self.endpoint)
         out: list[int] = []

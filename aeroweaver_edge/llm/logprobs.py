@@ -23,6 +23,10 @@ Rules, decided once here:
   lie outside the list, e.g. when sampling at temperature > 0).
 * **Degenerate**: an empty top list, or every value in {0, -9999}, carries no distribution
   (seen with DeepSeek). Then ``logprobs_usable=False`` and the generated text label is used.
+* **Invalid**: a log-probability is at most 0. A positive value anywhere in the row (beyond
+  float rounding, ``POSITIVE_TOLERANCE``) means the endpoint does not send log-probabilities
+  (raw logits, or garbage), so none of the row is a score: it is treated as unusable, like a
+  degenerate row, and the generated text label decides.
 """
 
 from __future__ import annotations
@@ -37,6 +41,9 @@ from aeroweaver_edge.scores import NOT_OBSERVED, LabelScores, omitted_bound
 
 OK_FINISH = frozenset({"stop", "length"})
 _MAX_TEXT = 40
+POSITIVE_TOLERANCE = 1e-6
+"""A log-probability above 0 by more than this is no log-probability (float rounding of a
+certain token gives 1e-7 at most)."""
 
 
 def normalise_token(token: str) -> str:
@@ -69,6 +76,7 @@ class Row:
 
     tops: dict[str, float]
     sampled: tuple[str, float] | None
+    invalid: str | None = None  # why the row holds no log-probabilities (a positive value)
 
     @property
     def entries(self) -> dict[str, float]:
@@ -111,11 +119,23 @@ def first_row(raw: Mapping[str, Any]) -> Row | None:
     row = rows[0]
     tops: dict[str, float] = {}
     items = row.get("top_logprobs")
+    positive: float | None = None
     for item in items if isinstance(items, list) else []:
         entry = _entry(item)
         if entry is not None:  # vLLM may append the sampled token again: keep the best
             tops[entry[0]] = max(entry[1], tops.get(entry[0], -math.inf))
-    return Row(tops, _entry(row))
+            if entry[1] > POSITIVE_TOLERANCE:
+                positive = max(entry[1], positive or entry[1])
+    sampled = _entry(row)
+    if sampled is not None and sampled[1] > POSITIVE_TOLERANCE:
+        positive = max(sampled[1], positive or sampled[1])
+    if positive is not None:
+        why = f"positive logprob {positive:+.3g} (a log-probability is at most 0)"
+        return Row({}, None, why)
+    tops = {t: min(v, 0.0) for t, v in tops.items()}  # rounding noise above 0 is 0
+    if sampled is not None:
+        sampled = (sampled[0], min(sampled[1], 0.0))
+    return Row(tops, sampled)
 
 
 def is_degenerate(row: Row) -> bool:
@@ -192,6 +212,10 @@ def parse_label_scores(
     row = first_row(raw)
     if row is None:
         extra["unusable"] = "no content logprobs in response"
+        return LabelScores(logprobs={}, logprobs_usable=False, extra=extra, **common)
+    if row.invalid is not None:
+        extra["unusable"] = row.invalid
+        extra["invalid_logprobs"] = True
         return LabelScores(logprobs={}, logprobs_usable=False, extra=extra, **common)
     extra["returned"] = len(row.tops)
     if is_degenerate(row):

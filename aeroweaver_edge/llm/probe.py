@@ -5,7 +5,9 @@ logprobs (the selector acts on it for the rest of the run):
 
 * ``ok`` — a real distribution with enough mass on the labels: experience correction on;
 * ``rejected`` — the endpoint refuses logprobs (a 400/422 that goes away when the same
-  request is sent again without logprob parameters) or silently drops them;
+  request is sent again without logprob parameters, and that either names logprobs or
+  repeats: one unexplained 400 may be transient, and a verdict holds for the whole run) or
+  silently drops them;
 * ``degenerate`` — only 0 / -9999 values or an empty top list (an argmax, not a distribution);
 * ``low_label_mass`` — labels get too little of the mass (e.g. a base model).
 
@@ -191,6 +193,8 @@ def classify_response(
         return ProbeResult(
             "rejected", 0.0, f"response carries no logprobs (generated {text!r})", endpoint, model
         )
+    if row.invalid is not None:
+        return ProbeResult("degenerate", 0.0, row.invalid, endpoint, model)
     if is_degenerate(row):
         return ProbeResult(
             "degenerate", 0.0, "only 0 / -9999 values or an empty top list", endpoint, model
@@ -235,15 +239,36 @@ def classify_error(exc: LLMError, *, model: str = "") -> ProbeResult:
     return ProbeResult(kind, 0.0, detail, exc.endpoint, model)
 
 
-def refused_logprobs(exc: LLMError) -> ProbeResult:
+def refused_logprobs(exc: LLMError, *, repeated: int = 0) -> ProbeResult:
     """A 400/422 with logprob parameters that a retry without them answered."""
     assert isinstance(exc, LLMHTTPError)
+    times = f" ({repeated + 1} times)" if repeated else ""
     return ProbeResult(
         "rejected",
         0.0,
-        f"HTTP {exc.status} with logprob parameters, answered without them: {exc.body}",
+        f"HTTP {exc.status} with logprob parameters{times}, answered without them: {exc.body}",
         exc.endpoint,
     )
+
+
+REFUSALS_TO_DECIDE = 2
+"""Unexplained refusals (400/422 with logprobs, answered without them, not naming logprobs)
+it takes to decide ``rejected``: one may be a transient proxy or server hiccup."""
+
+
+def names_logprobs(exc: LLMError) -> bool:
+    """The refusal says it is about the logprob parameters."""
+    body = exc.body if isinstance(exc, LLMHTTPError) else ""
+    return "logprob" in f"{exc} {body}".lower()
+
+
+def refusal_verdict(exc: LLMError, earlier: int) -> ProbeResult | None:
+    """After a refusal with logprob parameters that the same request without them answered:
+    ``rejected`` when the refusal names logprobs or repeats (``earlier`` unexplained ones
+    came before), else ``None``: this one decides nothing (that answer has no logprobs)."""
+    if names_logprobs(exc) or earlier + 1 >= REFUSALS_TO_DECIDE:
+        return refused_logprobs(exc, repeated=0 if names_logprobs(exc) else earlier)
+    return None
 
 
 def may_be_logprobs(exc: LLMError) -> bool:
@@ -271,27 +296,29 @@ async def probe_endpoint(
     check_tokens: bool = True,
 ) -> ProbeResult:
     """One 1-token request with logprobs, classified. Never raises ``LLMError``."""
-    try:
-        result = await client.chat(
-            probe_messages(),
-            tag=CallTag(purpose="probe"),
-            max_tokens=1,
-            temperature=0,
-            logprobs=True,
-            top_logprobs=top_logprobs,
-        )
-    except LLMError as exc:
-        if not may_be_logprobs(exc):
-            return classify_error(exc, model=client.model)
-        try:  # the same request without logprob parameters tells what was refused
-            await client.chat(
-                probe_messages(), tag=CallTag(purpose="probe"), max_tokens=1, temperature=0
-            )
-        except LLMError as again:
-            # Refused without logprobs too: the request itself is the problem (context
-            # length, a model the provider does not serve), not logprob support.
-            return classify_error(again if not may_be_logprobs(again) else exc, model=client.model)
-        return replace(refused_logprobs(exc), model=client.model)
+    tag = CallTag(purpose="probe")
+    refusals = 0
+    while True:
+        try:
+            result = await client.chat(
+                probe_messages(), tag=tag, max_tokens=1, temperature=0, logprobs=True,
+                top_logprobs=top_logprobs,
+            )  # fmt: skip
+            break
+        except LLMError as exc:
+            if not may_be_logprobs(exc):
+                return classify_error(exc, model=client.model)
+            try:  # the same request without logprob parameters tells what was refused
+                await client.chat(probe_messages(), tag=tag, max_tokens=1, temperature=0)
+            except LLMError as again:
+                # Refused without logprobs too: the request itself is the problem (context
+                # length, a model the provider does not serve), not logprob support.
+                why = again if not may_be_logprobs(again) else exc
+                return classify_error(why, model=client.model)
+            verdict = refusal_verdict(exc, refusals)
+            if verdict is not None:
+                return replace(verdict, model=client.model)
+            refusals += 1  # unexplained and the first: ask with logprobs once more
     probe = classify_response(
         result.raw, PROBE_LABELS, min_label_mass, endpoint=client.endpoint, model=client.model
     )

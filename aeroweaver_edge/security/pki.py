@@ -172,10 +172,23 @@ def cert_fingerprint(cert_pem: bytes) -> str:
 
 
 def load_signing_key(path: Path) -> ed25519.Ed25519PrivateKey:
-    key = serialization.load_pem_private_key(_read(path), password=None)
+    """The message-signing key, checked like ssh checks a key (``key_files``)."""
+    from aeroweaver_edge.security.key_files import load_private_key
+
+    key = load_private_key(path, "signing key")
     if not isinstance(key, ed25519.Ed25519PrivateKey):
-        raise PkiError(f"{path}: not an Ed25519 private key")
+        raise PkiError(f"{path}: not an Ed25519 private key (a signing key is Ed25519)")
     return key
+
+
+def load_tls_key(key_path: Path, cert: x509.Certificate, cert_path: Path) -> None:
+    """The TLS private key is private, parses, and belongs to ``cert`` (Zenoh reads the file
+    itself, so this is the one place a wrong or leaked key is caught with its name)."""
+    from aeroweaver_edge.security.key_files import load_private_key
+
+    key = load_private_key(key_path, "TLS private key")
+    if not isinstance(key, ec.EllipticCurvePrivateKey) or raw_pub_der(key) != cert_pub_der(cert):
+        raise PkiError(f"{key_path}: not the private key of {cert_path}")
 
 
 def load_cert(path: Path) -> x509.Certificate:
@@ -186,7 +199,9 @@ def load_cert(path: Path) -> x509.Certificate:
 
 
 def load_ca(cert_path: Path, key_path: Path) -> CertifiedKey:
-    ca = CertifiedKey(_read(cert_path), _read(key_path))
+    from aeroweaver_edge.security.key_files import read_private
+
+    ca = CertifiedKey(_read(cert_path), read_private(key_path, "CA private key"))
     try:
         key = serialization.load_pem_private_key(ca.key_pem, password=None)
         cert = ca.cert

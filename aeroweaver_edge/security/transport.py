@@ -63,8 +63,7 @@ def load_security(sec: SecurityConfig, namespace: str | None = None) -> LoadedSe
         raise PkiError(
             f"{cert_path}: expired on {cert.not_valid_after_utc:%Y-%m-%d} (aeroweaver keys rotate)"
         )
-    if not key_path.is_file():
-        raise PkiError(f"{key_path}: no such TLS key")
+    pki.load_tls_key(key_path, cert, cert_path)
     auth = None
     if sec.sign:
         signer = None

@@ -36,7 +36,10 @@ async def test_trace_rounds_add_up_to_the_summary(tmp_path: Path, task: str, bod
             assert d["chosen"] in labels
             assert d["label"] == d["chosen"]
             assert set(d["base"]) <= set(labels)
-            assert d["invocation"] == d["options"][labels.index(d["chosen"])].split(". ", 1)[1]
+            shown = d["options"][labels.index(d["chosen"])].split(". ", 1)[1]  # as prompted
+            skill, args = shown.split("(", 1)
+            assert d["invocation"].startswith(skill + "(")  # same skill, and same value:
+            assert args.rstrip(")") in d["invocation"]  # cover_landmark(L0) is target_id=L0
     for u in uavs:
         total = math.fsum(r["rewards"][u] for r in rounds)
         assert total == pytest.approx(data["agent_returns"][u], abs=1e-5)

@@ -149,6 +149,7 @@ def test_a_process_with_a_stale_signing_key_is_refused(tmp_path: Path) -> None:
     p = SwarmPki.create(tmp_path / "p", "s", default_members(1))
     stale = tmp_path / "old-sign.key"
     stale.write_bytes(p.paths("uav0").sign_key.read_bytes())
+    stale.chmod(0o600)  # a private key others can read is refused before anything else
     p.rotate("uav0")
     sec = p.security_for("uav0").model_copy(update={"signing_key": str(stale)})
     with pytest.raises(PkiError, match="not the signing key registered"):
@@ -161,7 +162,7 @@ def test_a_process_with_a_stale_signing_key_is_refused(tmp_path: Path) -> None:
         ({"identity": "uav1"}, "certificate CN is 'uav0', this process is 'uav1'"),
         ({"identity": "uav9"}, "no identity 'uav9'"),
         ({"cert": "MISSING"}, "cannot read"),
-        ({"key": "MISSING"}, "no such TLS key"),
+        ({"key": "MISSING"}, "cannot read the TLS private key"),
         ({"signing_key": None}, "needs signing_key"),
         ({"ca": "ROGUE"}, "does not verify against the swarm CA"),
         ({"cert": "ROGUE_CERT"}, "not issued by the swarm CA"),
