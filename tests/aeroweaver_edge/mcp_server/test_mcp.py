@@ -112,8 +112,8 @@ async def test_mcp_over_http_plans_starts_approves_and_stops(swarm: MeshConfig) 
             assert roster["commander"] is False  # nobody commands yet
             await refusals_are_tool_errors(client)
 
-            huge = data(await client.call_tool("plan_mission", {"text": "Cover. " * 10_000}))
-            assert "at most 8192 bytes" in huge["error"]  # the one mission-text check
+            huge = error(await client.call_tool("plan_mission", {"text": "Cover. " * 10_000}))
+            assert "at most 8192 bytes" in huge  # the one mission-text check, a tool error
             text = "Cover the three landmarks"
             plan = data(await client.call_tool("plan_mission", {"text": text}))
             assert plan["plan"]["task"] == "coverage"
