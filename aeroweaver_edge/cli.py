@@ -17,7 +17,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aeroweaver_edge import defaults
 from aeroweaver_edge.cli_checks import (
@@ -42,8 +42,12 @@ from aeroweaver_edge.config import (
     load_config,
     parse_config,
 )
+from aeroweaver_edge.endpoints import endpoint_arg
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.security.keys_dir import SwarmDir
 
 
 def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
@@ -204,10 +208,13 @@ def cmd_mission(args: argparse.Namespace) -> int:
     from aeroweaver_edge.mesh import build_zenoh_config
     from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
     from aeroweaver_edge.orchestration.view import LiveView, print_mission
+    from aeroweaver_edge.security.keys_dir import SwarmDir, resolve_swarm
 
     world_mesh = None
-    if args.keys:
-        mesh, world_mesh = _secured_mission_meshes(args)
+    keys = SwarmDir.open(args.keys) if args.keys else None
+    swarm = resolve_swarm(args.swarm, keys)
+    if keys is not None:
+        mesh, world_mesh = _secured_mission_meshes(args, keys)
     else:
         mesh = parse_config(
             {"listen": args.listen or ["tcp/127.0.0.1:0"], "connect": args.connect or [],
@@ -220,7 +227,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
         check_output_file(Path(args.json), "--json")
     llm = None if args.no_llm else _llm_from_args(args)
     opts = MissionStartOptions(
-        text=args.text, swarm=args.swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
+        text=args.text, swarm=swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
         top_k=args.top_k,
         sim_world=args.sim_world, seed=args.seed, episodes=args.episodes,
         max_rounds=args.rounds, world_mesh=world_mesh if args.sim_world else None,
@@ -252,41 +259,19 @@ def cmd_mission(args: argparse.Namespace) -> int:
     return 0
 
 
-def _secured_mission_meshes(args: argparse.Namespace) -> tuple[MeshConfig, MeshConfig | None]:
+def _secured_mission_meshes(
+    args: argparse.Namespace, keys: SwarmDir
+) -> tuple[MeshConfig, MeshConfig | None]:
     """``mission start --keys DIR``: the Commander's (and the world's) secured ``[mesh]``
-    from a swarm directory made by ``aeroweaver keys init``."""
+    from a swarm directory made by ``aeroweaver keys init`` (flags override its endpoints)."""
     from aeroweaver_edge.config import ConfigError
-    from aeroweaver_edge.security import render
-    from aeroweaver_edge.security.identity import COMMANDER, WORLD, SwarmPki
-    from aeroweaver_edge.security.pki import PkiError
+    from aeroweaver_edge.security.identity import COMMANDER, WORLD
 
-    try:
-        pki = SwarmPki.load(Path(args.keys))
-    except (PkiError, OSError) as exc:
-        raise ConfigError(f"--keys {args.keys}: {exc}") from None
-    if pki.swarm != args.swarm:
-        raise ConfigError(
-            f"--keys {args.keys} is for swarm {pki.swarm!r}, not {args.swarm!r}",
-            f"pass --swarm {pki.swarm}",
-        )
-    out: list[MeshConfig | None] = []
-    for name in (COMMANDER, WORLD):
-        if name not in pki.identities.members:
-            out.append(None)
-            continue
-        try:
-            cfg = render.mesh_config(
-                pki, name, listen=args.listen or ["tls/127.0.0.1:0"], connect=args.connect or [],
-                namespace=args.namespace,
-            )  # fmt: skip
-        except (PkiError, ValueError) as exc:
-            raise ConfigError(f"--keys {args.keys}: {exc}") from None
-        out.append(cfg)
-    cmdr, world = out
-    if cmdr is None:
-        raise ConfigError(f"--keys {args.keys}: no {COMMANDER!r} identity in that swarm")
-    if args.sim_world and world is None:
+    flags = {"listen": args.listen, "connect": args.connect, "namespace": args.namespace}
+    cmdr = keys.mesh(COMMANDER, **flags)
+    if args.sim_world and not keys.has(WORLD):
         raise ConfigError(f"--keys {args.keys}: --sim-world needs the {WORLD!r} identity")
+    world = keys.mesh(WORLD, **flags) if keys.has(WORLD) else None
     return cmdr, world
 
 
@@ -556,14 +541,21 @@ def build_parser() -> argparse.ArgumentParser:
     msub = m.add_subparsers(dest="mission_command", required=True)
     ms = msub.add_parser("start", help="parse, assign, publish and watch a mission")
     ms.add_argument("text", help="the mission in natural language")
-    ms.add_argument("--swarm", default="default")
-    ms.add_argument("--connect", action="append", help="zenoh endpoint of a daemon or router")
-    ms.add_argument("--listen", action="append", help="zenoh endpoint to listen on")
+    ms.add_argument("--swarm", help="swarm id (default: the --keys directory's, else 'default')")
+    ms.add_argument(
+        "--connect", action="append", type=endpoint_arg("connect"),
+        help="zenoh endpoint of a daemon or router (default: the --keys directory's)",
+    )  # fmt: skip
+    ms.add_argument(
+        "--listen", action="append", type=endpoint_arg("listen"),
+        help="zenoh endpoint to listen on",
+    )  # fmt: skip
     ms.add_argument("--namespace", help="zenoh namespace of the swarm")
     ms.add_argument(
         "--keys", metavar="DIR",
         help="secured swarm: the directory from `aeroweaver keys init` (runs as cmdr; the "
-        "sim world as world); endpoints are then tls/",
+        "sim world as world); it names the swarm and the router, so --swarm and --connect "
+        "are not needed; endpoints are then tls/",
     )  # fmt: skip
     ms.add_argument("--roster-wait", type=finite(), default=3.0, help="seconds to discover daemons")
     ms.add_argument("--sim-world", action="store_true", help="also run the kinematic world")
