@@ -151,7 +151,7 @@ _UNKNOWN = ("see aeroweaver_edge/config.py", "")
 def render(cfg: BaseModel, header: list[str], notes: dict[str, list[str]] | None = None) -> str:
     """``cfg`` as a complete TOML file: ``header`` lines first (without ``#``), then every
     key with its comment. ``notes[section]`` adds comment lines at the top of a section."""
-    out = _comment(header)
+    out = [*_comment(header), ""]
     _model(cfg, "", out, notes or {})
     return "\n".join(out) + "\n"
 
@@ -181,7 +181,12 @@ def _comment(lines: list[str], width: int = 90) -> list[str]:
     """Comment lines, each wrapped to ``width`` columns."""
     out: list[str] = []
     for line in lines:
-        out += [f"# {part}" for part in textwrap.wrap(line, width - 2)] or ["#"]
+        out += [
+            f"# {part}"
+            for part in textwrap.wrap(
+                line, width - 2, break_long_words=False, break_on_hyphens=False
+            )
+        ] or ["#"]
     return out
 
 

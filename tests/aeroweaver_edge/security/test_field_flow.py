@@ -60,11 +60,10 @@ async def wait_for_uavs(keys_dir: Path, router: str, uavs: set[str], timeout_s: 
 def test_provision_start_and_fly_a_secured_mission(tmp_path: Path) -> None:
     keys, port = tmp_path / "keys", free_port()
     router = f"tls/127.0.0.1:{port}"
+    # scripted, so no LLM is needed
     assert main(["keys", "init", "--swarm", SWARM, "--uavs", "2", "--out", str(keys),
-                 "--listen", router, "--connect", router, "--mode", "client"]) == 0  # fmt: skip
-    for uav in ("uav0", "uav1"):  # scripted, so no LLM is needed
-        toml = keys / uav / "uav.toml"
-        toml.write_text(toml.read_text() + '\n[agent]\nselector = "scripted"\nbeta = 0.0\n')
+                 "--listen", router, "--connect", router, "--mode", "client",
+                 "--selector", "scripted"]) == 0  # fmt: skip
     procs = [spawn("router", "--config", str(keys / "router" / "zenoh.json5"),
                    log=tmp_path / "router.log")]  # fmt: skip
     try:
