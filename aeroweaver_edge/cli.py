@@ -160,6 +160,7 @@ def cmd_daemon(args: argparse.Namespace) -> int:
 def _daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.app import run_daemon
     from aeroweaver_edge.mesh import build_zenoh_config
+    from aeroweaver_edge.run_dir import ENV_PARENT
     from aeroweaver_edge.systemd_notify import Supervision
 
     cfg = load_config(args.config, UavConfig)
@@ -177,7 +178,9 @@ def _daemon(args: argparse.Namespace) -> int:
             supervision.ready(f"{cfg.uav} up: mesh open, vehicle link started")
 
         try:
-            return await run_daemon(cfg, on_ready=ready)
+            # A daemon a simulated run started ends with that run's world; any other is a
+            # service: missions come and go, and only a signal stops it.
+            return await run_daemon(cfg, on_ready=ready, service=ENV_PARENT not in os.environ)
         finally:
             await supervision.aclose()
 

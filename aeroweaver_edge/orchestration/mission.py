@@ -103,6 +103,9 @@ async def start_mission(
                 )  # fmt: skip
                 await runner.start()
                 stack.push_async_callback(runner.aclose)
+                # The world's end, told to every daemon, before its session closes: a
+                # service daemon lands and waits for the next mission at once.
+                stack.callback(runner.shutdown)
                 await runner.wait_alive(plan.participants, 10.0)
                 for ep in range(opts.episodes):
                     res = await until_stopped(runner.run_episode(ep), commander)
