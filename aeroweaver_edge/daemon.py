@@ -146,6 +146,7 @@ class UavDaemon:
         self.memory = memory
         self.mission = MissionState(cfg.uav, track_commander=True)
         self._holding_for_commander = False
+        self.running = False  # inside run(): a stop must let its clean-up hold or land
         self._logged_mission: str | None = None  # the mission the INFO log last announced
         self._mission_start_stats: tuple[int, int, dict[str, int]] = (0, 0, {})
         self._need_catch_up = asyncio.Event()
@@ -304,9 +305,16 @@ class UavDaemon:
                 invocation="",
                 label=None,
                 held=True,
+                hold_reason=self._waiting_for(),
                 **self._counters(),
             ),
         )
+
+    def _waiting_for(self) -> str | None:
+        """What this daemon waits for before it can fly (a simulated world nobody runs
+        yet), for the Commander to tell the operator; None when nothing."""
+        waiting = getattr(self.ports.clock, "waiting_for", None)
+        return waiting() if waiting is not None else None
 
     async def _pump_experience(self, sub: Subscription[ExperienceRecord]) -> None:
         """Take same-role peers' records as they come (stored at the next round start, in
@@ -384,6 +392,7 @@ class UavDaemon:
         """Run until the clock says the run is over (or the task is cancelled). A
         ``service`` daemon (``aeroweaver daemon``) never ends by itself: when a simulated
         world ends it lands, forgets that world and waits for the next mission's."""
+        self.running = True
         # Subscribe now, before link.start() declares our liveliness token: a Commander that
         # sees the token may publish at once, and that must reach us.
         context = self.mesh.subscribe(self.keys.context, MissionContext)
@@ -456,6 +465,7 @@ class UavDaemon:
                 await self._approval_link.aclose()
             if self._peer_link is not None:
                 await self._peer_link.aclose()
+            self.running = False
         return self.stats
 
     async def _next_world(self) -> bool:

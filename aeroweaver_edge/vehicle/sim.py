@@ -40,6 +40,9 @@ if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh, Subscription
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
+WAITING_FOR_WORLD = "waiting for a simulated world"
+"""What this UAV's ready report says while no world flies it (``waiting_for``): the
+Commander tells an operator who runs no world at once, instead of watching in silence."""
 WORLD = "world"  # the simulated world's identity (security.identity.WORLD)
 
 
@@ -102,6 +105,10 @@ class SimLink:
         """No world is being flown: none sent this UAV a perception since the last
         ``next_world``, or the one that did has ended (its shutdown came)."""
         return self._world_epoch is None or self._over
+
+    def waiting_for(self) -> str | None:
+        """What this link waits for before a round can start, if anything."""
+        return f"{WAITING_FOR_WORLD} (sim backend)" if self.world_over else None
 
     def _admit_world(self, epoch: int) -> str | None:
         """Admit a perception's epoch: the current world's, or a new world's (a later
