@@ -273,7 +273,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
         top_k=args.top_k,
         sim_world=args.sim_world, seed=args.seed, episodes=args.episodes,
         max_rounds=args.rounds, world_mesh=world_mesh if args.sim_world else None,
-        lost_grace_s=args.lost_grace,
+        lost_grace_s=args.lost_grace, pace_s=args.pace,
     )  # fmt: skip
     console = Console(highlight=False)
     field: list[FieldView] = []
@@ -660,6 +660,10 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument(
         "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"
     )
+    ms.add_argument(
+        "--pace", type=finite(strict=False), default=0.0, metavar="SECONDS",
+        help="with --sim-world: wall-clock floor per round (default 0)",
+    )  # fmt: skip
     ms.add_argument(
         "--lost-grace", type=finite(), default=10.0, metavar="SECONDS",
         help="stop the mission once every UAV has been out of contact this long (default 10)",

@@ -112,9 +112,9 @@ def mission_security(
     daemons: Counter[str] = Counter()
     for p in board.uavs.values():
         daemons.update(p.rejected)
+    # Not ``board.foreign``: in the field an idle daemon reports every round with no
+    # mission, so reports for no (or another) mission are normal traffic here.
     commander: Counter[str] = Counter(cmdr_mesh.codec.stats.rejected)
-    if board.foreign:
-        commander["foreign_report"] += board.foreign
     total = commander + daemons
     return {
         **{k: base[k] for k in ("tls", "mtls", "acl", "signed")},

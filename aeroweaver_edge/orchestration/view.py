@@ -87,14 +87,16 @@ class LiveView:
 
 
 class FieldView:
-    """``mission start`` without a simulated world: a line per round once every UAV in the
-    mission reported it (or a later round began), and a line per phase (ready, final)."""
+    """``mission start`` without a simulated world: a line per round of the swarm -- once
+    every UAV in the mission reported a new round, or one reported twice (the others'
+    places then say ``no report``) -- and a line per phase (ready, final). In the field
+    each daemon counts rounds on its own clock, so each UAV's entry carries its round."""
 
     def __init__(self, participants: list[str], console: Console | None = None) -> None:
         self.console = console or Console(stderr=False, highlight=False)
         self.participants = sorted(participants, key=natural)
-        self._rounds: dict[tuple[int, int], dict[str, ProgressReport]] = {}
-        self._printed: tuple[int, int] = (-1, -1)
+        self._pending: dict[str, ProgressReport] = {}
+        self.lines = 0
 
     def on_report(self, rep: ProgressReport) -> None:
         if rep.uav not in self.participants:
@@ -108,28 +110,26 @@ class FieldView:
             return
         if rep.phase != "round":
             return
-        key = (rep.episode, rep.round)
-        if key <= self._printed:
-            return
-        self._rounds.setdefault(key, {})[rep.uav] = rep
-        for k in sorted(self._rounds):
-            if len(self._rounds[k]) == len(self.participants) or k < key:
-                self._print(k, self._rounds.pop(k))
-            else:
-                break
+        if rep.uav in self._pending:
+            self._flush()
+        self._pending[rep.uav] = rep
+        if len(self._pending) == len(self.participants):
+            self._flush()
 
-    def _print(self, key: tuple[int, int], reps: dict[str, ProgressReport]) -> None:
-        self._printed = max(self._printed, key)
+    def _flush(self) -> None:
         parts = []
         for uav in self.participants:
-            r = reps.get(uav)
+            r = self._pending.get(uav)
             if r is None:
                 parts.append(f"{uav} no report")
                 continue
             held = f"HOLD[{r.hold_cause or 'hold'}] " if r.held else ""
             tok = r.prompt_tokens + r.completion_tokens
-            parts.append(f"{uav} {held}{r.invocation or '-'}" + (f" tok {tok}" if tok else ""))
-        self._say(f"round {key[1] + 1:3d} | " + " | ".join(parts))
+            line = f"{uav} r{r.round + 1} {held}{r.invocation or '-'}"
+            parts.append(line + (f" tok {tok}" if tok else ""))
+        self._pending.clear()
+        self.lines += 1
+        self._say(f"round {self.lines:3d} | " + " | ".join(parts))
 
     def _say(self, line: str) -> None:
         self.console.print(line, soft_wrap=True, markup=False)
