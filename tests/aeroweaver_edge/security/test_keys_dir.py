@@ -65,7 +65,7 @@ def test_mission_start_needs_only_keys(
 ) -> None:
     seen: list[mission.MissionStartOptions] = []
 
-    async def fake(opts: mission.MissionStartOptions, *_: Any) -> dict[str, Any]:
+    async def fake(opts: mission.MissionStartOptions, *_: Any, **__: Any) -> dict[str, Any]:
         seen.append(opts)
         raise UserError("stopped by the test")
 
