@@ -172,9 +172,16 @@ def test_the_rehearsal_in_docs_field_md_flies(tmp_path: Path) -> None:
         # one landmark each: the three drones covered the three landmarks
         targets = {row["last"] for row in progress.values()}
         assert targets == {f"cover_landmark(target_id={lm})" for lm in LANDMARKS}, progress
-        # TODO(lead): field missions record no episodes yet (orchestration/mission.py fills
-        # "episodes" only with --sim-world); assert record["episodes"], "security" and
-        # "lost_uavs" once issue 20 item 4 lands.
+        assert record["lost_uavs"] == {}
+        assert record["out_of_contact"] == []
+        security = record["security"]
+        assert isinstance(security, dict)
+        assert (security["tls"], security["acl"], security["signed"]) == (True, True, True)
+        # TODO(lead): a field mission's record has "episodes": [] (orchestration/mission.py
+        # fills episodes only with --sim-world: no world, no rewards); assert
+        # record["episodes"] once field missions record one.
+    ids = [r["mission"]["mission_id"] for r in records]  # type: ignore[index]
+    assert len(set(ids)) == 2, ids  # two missions, two ids, on the same daemons
     # and the emulated vehicles were really there (the emulator's own status lines)
     emulator = (tmp_path / emulator_log).read_text()
     for name, (north, east) in LANDMARKS.items():

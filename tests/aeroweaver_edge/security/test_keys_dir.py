@@ -120,3 +120,29 @@ def test_a_damaged_swarm_toml_is_one_line_and_exit_2(
     assert rc == 2
     assert message in err
     assert err.count("\n") == 1
+
+
+def test_mcp_needs_only_keys_and_starts_missions_as_cmdr(
+    keys: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("mcp")
+    from aeroweaver_edge.mcp_server import server
+
+    seen: list[server.McpOptions] = []
+
+    async def fake(opts: server.McpOptions, *_: Any, **__: Any) -> None:
+        seen.append(opts)
+        raise UserError("stopped by the test")
+
+    monkeypatch.setattr(server, "serve", fake)
+    assert main(["mcp", "--keys", str(keys)]) == 2
+    assert "stopped by the test" in capsys.readouterr().err
+    [opts] = seen
+    assert opts.swarm == "s"
+    assert opts.mesh.connect == [ROUTER]
+    assert opts.mesh.security is not None
+    assert opts.mesh.security.identity == "operator"
+    assert opts.commander_mesh is not None
+    assert opts.commander_mesh.connect == [ROUTER]
+    assert opts.commander_mesh.security is not None
+    assert opts.commander_mesh.security.identity == "cmdr"
