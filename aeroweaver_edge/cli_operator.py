@@ -67,12 +67,14 @@ def add_mesh_flags(p: argparse.ArgumentParser, identity: str) -> None:
 def mesh_from_args(args: argparse.Namespace) -> Any:
     """The MeshConfig the flags describe; any problem is one ConfigError/UserError. With
     ``--keys DIR`` the directory supplies the swarm (``args.swarm`` is filled in here when
-    not given) and the endpoints to dial (``security.keys_dir``)."""
+    not given) and the endpoints to dial (``security.keys_dir``); a ``--mesh-config`` file
+    with a top-level ``swarm`` (``keys init``'s ``mesh.toml``) supplies the swarm too."""
     from aeroweaver_edge.config import ConfigError, MeshConfig, parse_config
     from aeroweaver_edge.mesh import build_zenoh_config
     from aeroweaver_edge.security.keys_dir import SwarmDir, resolve_swarm
 
     keys = SwarmDir.open(args.keys) if args.keys else None
+    flag_swarm = args.swarm
     args.swarm = resolve_swarm(args.swarm, keys)
     if args.mesh_config:
         path = Path(args.mesh_config)
@@ -84,6 +86,8 @@ def mesh_from_args(args: argparse.Namespace) -> Any:
         if not isinstance(data, dict) or not isinstance(data.get("mesh"), dict):
             raise ConfigError(f"{path}: no [mesh] table")
         cfg = parse_config(data["mesh"], MeshConfig, f"{path} [mesh]")
+        if flag_swarm is None and keys is None and isinstance(data.get("swarm"), str):
+            args.swarm = data["swarm"]  # a mesh.toml from keys init names its swarm
     elif keys is not None:
         cfg = keys.mesh(
             args.identity, listen=args.listen, connect=args.connect, namespace=args.namespace

@@ -27,8 +27,8 @@ def keys(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def operator_args(keys: Path, **flags: Any) -> argparse.Namespace:
-    base = {"keys": str(keys), "swarm": None, "connect": None, "listen": None,
+def operator_args(keys: Path | None, **flags: Any) -> argparse.Namespace:
+    base = {"keys": str(keys) if keys else None, "swarm": None, "connect": None, "listen": None,
             "namespace": None, "identity": "operator", "mesh_config": None}  # fmt: skip
     return argparse.Namespace(**{**base, **flags})
 
@@ -146,3 +146,13 @@ def test_mcp_needs_only_keys_and_starts_missions_as_cmdr(
     assert opts.commander_mesh.connect == [ROUTER]
     assert opts.commander_mesh.security is not None
     assert opts.commander_mesh.security.identity == "cmdr"
+
+
+def test_a_written_mesh_toml_works_as_mesh_config(keys: Path) -> None:
+    args = operator_args(None, mesh_config=str(keys / "operator" / "mesh.toml"))
+    cfg = mesh_from_args(args)
+    assert args.swarm == "s"  # the file names its swarm
+    assert cfg.connect == [ROUTER]
+    assert cfg.security is not None
+    assert cfg.security.identity == "operator"
+    assert cfg == SwarmDir.open(keys).mesh("operator")  # the same as --keys DIR builds
