@@ -181,8 +181,12 @@ def cmd_keys_init(args: argparse.Namespace) -> int:
         return _fail(f"keys init: {exc}")
     try:
         _build_atomically(out, lambda tmp: _write_swarm(tmp, out, args, members, plan))
-    except (UserError, ValueError, OSError) as exc:
-        return _fail(f"keys init: {getattr(exc, 'strerror', None) or exc}")
+    except OSError as exc:
+        name = str(exc.filename or "")
+        where = out if not name or f"/.{out.name}." in name else name  # not the temp name
+        return _fail(f"keys init: cannot write {where}: {exc.strerror or exc}")
+    except (UserError, ValueError) as exc:
+        return _fail(f"keys init: {exc}")
     _print_done(out, args, members, plan)
     return 0
 
@@ -359,7 +363,8 @@ def _print_done(out: Path, args: argparse.Namespace, members: dict[str, Any], pl
         "mavlink": "MAVLink from the autopilot",
         "mavsdk": "MAVSDK to the autopilot",
     }[args.vehicle]
-    print(f"  daemons: {out}/uavN/uav.toml for uav0..uav{len(uavs) - 1}, vehicle: {link}")
+    which = uavs[0] if len(uavs) == 1 else f"{uavs[0]}..{uavs[-1]}"
+    print(f"  daemons: {out}/uavN/uav.toml for {which}, vehicle: {link}")
     where = ", ".join(plan.ground_connect) or "nothing yet: pass --connect"
     print(f"  ground: --keys {out} is enough for mission start, console, mcp (dial {where})")
     if not args.loopback:
