@@ -266,7 +266,7 @@ def _uav_number(name: str) -> int:
 
 def _check_out(out: Path) -> Path:
     if out.is_symlink() or (out.exists() and not out.is_dir()):
-        raise UserError(f"--out {out}: exists and is not a directory (use a new directory)")
+        raise UserError(f"--out {out}: exists and is not a plain directory (use a new one)")
     if out.exists() and any(out.iterdir()):
         raise UserError(f"--out {out}: is not empty (use a new directory)")
     return out
@@ -275,10 +275,8 @@ def _check_out(out: Path) -> Path:
 def _build_atomically(out: Path, build: Any) -> None:
     """Build in a temporary sibling and rename it onto ``out`` at the end, so a failure
     leaves neither a partial directory nor a CA key lying around."""
-    first_new = next((p for p in [out.parent, *out.parent.parents] if not p.exists()), None)
-    top = first_new
-    while top is not None and not top.parent.exists():
-        top = top.parent
+    missing = [p for p in [out.parent, *out.parent.parents] if not p.exists()]
+    top = missing[-1] if missing else None  # the highest parent this call creates
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
     try:

@@ -95,7 +95,7 @@ INIT = ["keys", "init", "--swarm", "x", "--uavs", "1", "--out"]
         ([*INIT[:5], "100000", "--out", "{d}/a"], "100000 is out of range (1..50)"),
         (["keys", "init", "--swarm", "Bad!", "--uavs", "1", "--out", "{d}/b"], "swarm id"),
         ([*INIT, "{d}/full"], "is not empty"),
-        ([*INIT, "{d}/file"], "exists and is not a directory"),
+        ([*INIT, "{d}/file"], "exists and is not a plain directory"),
         ([*INIT, "{d}/c", "--host", "uav5=10.0.0.5"], "no identity 'uav5'"),
         ([*INIT, "{d}/c", "--host", "uav0=not an addr!"], "not an IP address or a DNS name"),
         ([*INIT, "{d}/c", "--host", "under_score.example"], "not an IP address or a DNS name"),
