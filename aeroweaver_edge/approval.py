@@ -48,25 +48,32 @@ VEHICLE_ACTION_SKILLS: Final[dict[str, VehicleActionKind]] = {
 }
 """Skill packages whose executor returns a ``VehicleAction`` of that kind."""
 
-_ACTION_NAMES: Final[dict[str, VehicleActionKind]] = {
-    **VEHICLE_ACTION_SKILLS,
-    "takeoff": "takeoff",
-    "return": "return_home",
-}
+ACTIONS: Final[tuple[VehicleActionKind, ...]] = ("takeoff", "land", "return_home")
+"""The one spelling of each vehicle action an operator approves: the wire's, the records',
+the resources' and the confirm phrases' (``approve uav0 takeoff``)."""
+ACTION_ALIASES: Final[dict[str, VehicleActionKind]] = {"take_off": "takeoff"}
+"""Accepted on input only, for commands written before the spelling was one (the
+``take_off`` skill's name); never written anywhere."""
 PENDING_S: Final = 120.0  # a pending action not asked for again within this long is dropped
 MAX_RECORDS: Final = 64
 MAX_SEEN_IDS: Final = 4096
 
 
 def parse_action(text: str) -> VehicleActionKind:
-    """A vehicle action from a skill or action name (``take_off``, ``takeoff``, ``land``,
-    ``return_home``, ``return``); ValueError naming the choices otherwise."""
-    try:
-        return _ACTION_NAMES[text.strip().lower()]
-    except KeyError:
-        raise ValueError(
-            f"unknown vehicle action {text!r}; choose take_off, land or return_home"
-        ) from None
+    """The canonical vehicle action (``takeoff``, ``land``, ``return_home``; ``take_off`` is
+    read as ``takeoff``); ValueError naming the choices otherwise."""
+    name = text.strip().lower()
+    for kind in ACTIONS:
+        if name == kind:
+            return kind
+    if name in ACTION_ALIASES:
+        return ACTION_ALIASES[name]
+    raise ValueError(f"unknown vehicle action {text!r}; choose takeoff, land or return_home")
+
+
+def approve_phrase(uav: str, action: VehicleActionKind) -> str:
+    """What an operator types to confirm an approval (console, MCP)."""
+    return f"approve {uav} {action}"
 
 
 def needs_approval(level: str, action: VehicleActionKind) -> bool:
@@ -250,8 +257,11 @@ class ApprovalGate:
 
 
 __all__ = [
+    "ACTIONS",
+    "ACTION_ALIASES",
     "VEHICLE_ACTION_SKILLS",
     "ApprovalGate",
+    "approve_phrase",
     "needs_approval",
     "parse_action",
 ]

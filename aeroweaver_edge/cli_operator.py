@@ -129,7 +129,9 @@ def add_parsers(sub: Any) -> None:
     )
     add_mesh_flags(a, "operator")
     a.add_argument("--uav", required=True, help="the UAV, e.g. uav0")
-    a.add_argument("--action", required=True, help="take_off, land or return_home")
+    a.add_argument(
+        "--action", required=True, help="takeoff, land or return_home (take_off: takeoff)"
+    )
     a.add_argument("--ttl", type=float, default=300.0, help="seconds it stays valid (default 300)")
     a.add_argument("--mission", default="", help="only for this mission id (default: any)")
     a.add_argument("--by", help="the person approving, for the record (default: login name)")
@@ -154,8 +156,8 @@ def add_parsers(sub: Any) -> None:
     )  # fmt: skip
     m.add_argument(
         "--commander-config", metavar="FILE",
-        help="[mesh] for the Commander session start_mission opens (secured swarms: the cmdr "
-        "identity); default: the same mesh settings",
+        help="[mesh] for the Commander session start_mission opens; default: the cmdr "
+        "identity of --keys DIR (and world for --sim-world), else the same mesh settings",
     )  # fmt: skip
     m.add_argument("--sim-world", action="store_true", help="start_mission also runs the world")
     m.add_argument("--pace", type=float, default=0.0, help="sim world: seconds per round floor")
@@ -238,22 +240,22 @@ def cmd_mcp(args: argparse.Namespace) -> int:
     from aeroweaver_edge.mcp_server.server import McpOptions, serve
 
     mesh_cfg = mesh_from_args(args)
-    commander_cfg = mesh_cfg
-    if args.commander_config or args.keys:  # --keys: the Commander runs as cmdr
+    commander_cfg, world_cfg = mesh_cfg, None
+    if args.keys and not args.mesh_config:  # the cmdr and world identities of the same swarm
+        from aeroweaver_edge.mcp_server.sessions import secured_sessions
+
+        cmdr, world_cfg = secured_sessions(
+            Path(args.keys), args.swarm, mesh_cfg, sim_world=args.sim_world
+        )
+        commander_cfg = cmdr or mesh_cfg  # none: start_mission says which identity it needs
+    if args.commander_config:
         commander_cfg = mesh_from_args(
-            argparse.Namespace(
-                **{
-                    **vars(args),
-                    "mesh_config": args.commander_config,
-                    "identity": "cmdr",
-                    "listen": None if args.keys and not args.commander_config else args.listen,
-                }
-            )
+            argparse.Namespace(**{**vars(args), "mesh_config": args.commander_config})
         )
     token = os.environ.get(args.operator_token_env) or None
     opts = McpOptions(
         swarm=args.swarm, mesh=mesh_cfg, commander_mesh=commander_cfg, operator_token=token,
-        sim_world=args.sim_world, pace_s=args.pace,
+        sim_world=args.sim_world, pace_s=args.pace, world_mesh=world_cfg,
     )  # fmt: skip
     if args.transport == "http":
         print(f"aeroweaver mcp: http://{args.host}:{args.port}/mcp", file=sys.stderr, flush=True)

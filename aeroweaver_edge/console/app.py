@@ -224,7 +224,7 @@ class ConsoleApp:
             return _error(400, str(exc))
         if not 0 < ttl <= MAX_TTL_S:
             return _error(400, f"ttl_s must be within (0, {MAX_TTL_S:g}] seconds")
-        phrase = approve_phrase(uav, SKILL_OF[action])
+        phrase = approve_phrase(uav, action)
         if body.get("confirm") != phrase:
             return _error(
                 400, f"type {phrase!r} to confirm: {uav} may then {action} within {ttl:g} s"

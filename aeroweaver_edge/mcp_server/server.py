@@ -10,12 +10,18 @@ Resources (read-only, from the console's observer on the mesh):
 * ``aeroweaver://decisions/last`` every UAV's decision in the last round;
 * ``aeroweaver://approvals`` vehicle actions waiting for an operator, and the records.
 
+* ``aeroweaver://tasks`` the tasks a mission text can name, with an example text each.
+
 Tools: ``plan_mission`` (parse mission text against the live roster and show the plan;
 changes nothing), ``start_mission``, ``stop_mission``, ``approve_action`` and ``uav_trace``.
-The acting three first answer with what they *will* do and the exact ``confirm`` phrase;
-only a call carrying that phrase and the operator token does it. They act as an operator
-does (operator keys; the Commander stops the mission, the UAV checks its approval); starting
-a mission makes this server the mission's Commander, as ``aeroweaver mission start`` does.
+The acting three first answer with what they *will* do and the exact ``confirm`` phrase,
+after checking the same preconditions as the real call (a dry run never promises what the
+call would refuse); only a call carrying that phrase and the operator token does it. They
+act as an operator does (operator keys; the Commander stops the mission, the UAV checks its
+approval); starting a mission makes this server the mission's Commander (the ``cmdr``
+identity on a secured swarm, and ``world`` for the simulated world), as ``aeroweaver mission
+start`` does. Every refusal or failure is a tool error (``isError``) with one line
+(``errors.py``).
 """
 
 from __future__ import annotations
@@ -26,24 +32,28 @@ import logging
 import secrets
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 from mcp.server.mcpserver import MCPServer
+from mcp.server.mcpserver.exceptions import ToolError
 
 from aeroweaver_edge import defaults as d
-from aeroweaver_edge.approval import VEHICLE_ACTION_SKILLS, parse_action
+from aeroweaver_edge.approval import approve_phrase
 from aeroweaver_edge.config import LLMConfig, MeshConfig
 from aeroweaver_edge.console.frames import FrameStore
 from aeroweaver_edge.console.observer import SwarmObserver
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.mcp_server.errors import AgentServer
 from aeroweaver_edge.mesh import Mesh
-from aeroweaver_edge.operator import OPERATOR, OperatorError, OperatorLink, record_dict
+from aeroweaver_edge.operator import OPERATOR, OperatorLink, record_dict
 from aeroweaver_edge.orchestration.planning import natural
+from aeroweaver_edge.wire import VehicleActionKind
 from commander.plan import MissionPlan
 
 log = logging.getLogger(__name__)
-SKILL_OF = {kind: skill for skill, kind in VEHICLE_ACTION_SKILLS.items()}
 READ_ONLY = "this MCP server is read-only: no operator token is configured"
+COMMANDER = "cmdr"  # security.identity.COMMANDER (not imported: no security import here)
+START_WAIT_S = 15.0  # start_mission: until the mission's context is seen on the mesh
+MAX_TTL_S = 86_400.0
 
 
 @dataclass(frozen=True)
@@ -51,6 +61,7 @@ class McpOptions:
     swarm: str
     mesh: MeshConfig
     commander_mesh: MeshConfig | None = None  # start_mission's Commander session (None: mesh)
+    world_mesh: MeshConfig | None = None  # the sim world's session (secured: the world identity)
     operator_token: str | None = None  # None: the acting tools refuse
     sim_world: bool = False  # start_mission also flies the kinematic world
     pace_s: float = 0.0
@@ -69,6 +80,7 @@ class SwarmService:
     store: FrameStore = field(default_factory=FrameStore)
     plans: dict[str, MissionPlan] = field(default_factory=dict)
     mission: asyncio.Task[dict[str, Any]] | None = None
+    run: dict[str, Any] = field(default_factory=dict)  # the mission started here: its state
     _mesh: Mesh | None = None
     _observer: SwarmObserver | None = None
     _op: OperatorLink | None = None
@@ -100,14 +112,6 @@ class SwarmService:
     def observer(self) -> SwarmObserver:
         assert self._observer is not None, "service not started"
         return self._observer
-
-    def authorised(self, token: str) -> str | None:
-        """None if ``token`` is the operator token, else why not."""
-        if self.opts.operator_token is None:
-            return READ_ONLY
-        if not secrets.compare_digest(token.encode(), self.opts.operator_token.encode()):
-            return "wrong operator token"
-        return None
 
     # -- views ----------------------------------------------------------------------------
 
@@ -160,6 +164,73 @@ class SwarmService:
             })  # fmt: skip
         return out
 
+    # -- preconditions: the dry run and the real call check the same ones -----------------
+
+    def check_acting(self) -> None:
+        if self.opts.operator_token is None:
+            raise ToolError(READ_ONLY)
+        sec = self._mesh.security if self._mesh is not None else None
+        if sec is not None and sec.role.value != OPERATOR:  # the ACL would drop its writes
+            raise ToolError(
+                f"this server joined the secured swarm as {sec.config.identity!r} "
+                f"({sec.role.value}), which may not act: start it with --identity operator"
+            )
+
+    def check_token(self, token: str) -> None:
+        self.check_acting()
+        assert self.opts.operator_token is not None
+        if not secrets.compare_digest(token.encode(), self.opts.operator_token.encode()):
+            raise ToolError("wrong operator token")
+
+    def known_plan(self, plan_id: str) -> MissionPlan:
+        plan = self.plans.get(plan_id)
+        if plan is None:
+            known = ", ".join(self.plans) or "none yet"
+            raise ToolError(f"unknown plan {plan_id!r} (planned here: {known}); "
+                            "call plan_mission first")  # fmt: skip
+        return plan
+
+    @property
+    def commander_mesh(self) -> MeshConfig:
+        return self.opts.commander_mesh or self.opts.mesh
+
+    async def check_start(self, plan: MissionPlan) -> None:
+        """Why ``start_mission`` would refuse ``plan`` now (ToolError), else nothing."""
+        self.check_acting()
+        if self.mission is not None and not self.mission.done():
+            raise ToolError(f"this server already runs mission {self.run.get('id')}; "
+                            "stop it first (stop_mission)")  # fmt: skip
+        sec = self.commander_mesh.security
+        if sec is not None and sec.identity != COMMANDER:
+            raise ToolError(
+                f"starting a mission on this secured swarm needs the {COMMANDER!r} identity, "
+                f"not {sec.identity!r}: start the server with --keys DIR (a swarm directory "
+                "with a cmdr identity) or --commander-config FILE"
+            )
+        if self.opts.sim_world and sec is not None and self.opts.world_mesh is None:
+            raise ToolError(
+                "--sim-world on a secured swarm needs the world identity's session: start the "
+                "server with --keys DIR (a swarm directory with a world identity)"
+            )
+        missing = [u for u in plan.participants if u not in self.observer.uavs]
+        if missing:
+            raise ToolError(f"{', '.join(missing)} of plan {plan.mission_id} not on the mesh "
+                            "any more: plan again (plan_mission)")  # fmt: skip
+        if COMMANDER in self.observer.alive:
+            ctx = await self.op.context()
+            what = f" (mission {ctx.mission_id}, {ctx.state})" if ctx is not None else ""
+            raise ToolError(f"another Commander is on the mesh{what}: stop it first")
+        if self.opts.sim_world and "world" in self.observer.alive:
+            raise ToolError("a simulated world already runs on this swarm: stop it first")
+
+    async def check_approve(self, uav: str, ttl_s: float) -> None:
+        self.check_acting()
+        if not 0 < ttl_s <= MAX_TTL_S:
+            raise ToolError(f"ttl_s {ttl_s:g}: must be within (0, {MAX_TTL_S:g}] seconds")
+        if uav not in self.observer.uavs:
+            up = ", ".join(sorted(self.observer.uavs, key=natural)) or "none"
+            raise ToolError(f"{uav} is not on the mesh (UAVs up: {up})")
+
     # -- actions --------------------------------------------------------------------------
 
     async def plan(self, text: str) -> dict[str, Any]:
@@ -167,7 +238,7 @@ class SwarmService:
 
         roster = sorted(self.observer.uavs, key=natural)
         if not roster:
-            raise OperatorError(f"no UAV daemon of swarm {self.opts.swarm!r} is up")
+            raise ToolError(f"no UAV daemon of swarm {self.opts.swarm!r} is up")
         plan = await plan_from_text(text, roster, self.opts.llm, self.opts.top_k)
         self.plans[plan.mission_id] = plan
         return {
@@ -188,34 +259,60 @@ class SwarmService:
     async def start_mission(self, plan: MissionPlan) -> dict[str, Any]:
         from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
 
-        if self.mission is not None and not self.mission.done():
-            raise OperatorError("this server already runs a mission; stop it first")
-        ctx = await self.op.context()
-        if ctx is not None and ctx.state == "active":
-            raise OperatorError(f"mission {ctx.mission_id} is active; stop it first")
+        await self.check_start(plan)
         opts = MissionStartOptions(
-            text=plan.text, swarm=self.opts.swarm, mesh=self.opts.commander_mesh or self.opts.mesh,
-            plan=plan, sim_world=self.opts.sim_world, max_rounds=self.opts.max_rounds,
-            pace_s=self.opts.pace_s, roster_wait_s=1.0,
+            text=plan.text, swarm=self.opts.swarm, mesh=self.commander_mesh, plan=plan,
+            sim_world=self.opts.sim_world, world_mesh=self.opts.world_mesh,
+            max_rounds=self.opts.max_rounds, pace_s=self.opts.pace_s, roster_wait_s=1.0,
         )  # fmt: skip
-        self.mission = asyncio.create_task(start_mission(opts), name=f"mcp-{plan.mission_id}")
-        async with asyncio.timeout(15.0):
-            while (self.store.meta.get("mission") or {}).get("id") != plan.mission_id:
-                if self.mission.done():
-                    self.mission.result()  # raises why it stopped
-                    raise OperatorError(f"mission {plan.mission_id} ended at once")
-                await self.store.wait_change(0.5)
+        self.run = {"id": plan.mission_id, "state": "starting"}
+        task = asyncio.create_task(start_mission(opts), name=f"mcp-{plan.mission_id}")
+        task.add_done_callback(self._ended)
+        self.mission = task
+        try:
+            async with asyncio.timeout(START_WAIT_S):
+                while (self.store.meta.get("mission") or {}).get("id") != plan.mission_id:
+                    if task.done():
+                        task.result()  # raises why it stopped
+                        raise ToolError(f"mission {plan.mission_id} ended at once: "
+                                        f"{self.run.get('ended')}")  # fmt: skip
+                    await self.store.wait_change(0.5)
+        except TimeoutError:
+            raise ToolError(f"mission {plan.mission_id} was not seen on the mesh within "
+                            f"{START_WAIT_S:g} s; it may still start (read aeroweaver://mission)"
+                            ) from None  # fmt: skip
+        self.run["state"] = "running"
         return {"started": plan.mission_id, "participants": plan.participants}
+
+    def _ended(self, task: asyncio.Task[dict[str, Any]]) -> None:
+        """The mission's outcome for ``aeroweaver://mission`` (and no unretrieved error)."""
+        if task.cancelled():
+            self.run.update(state="cancelled")
+            return
+        exc = task.exception()
+        if exc is not None:
+            from aeroweaver_edge.cli_errors import describe, one_line
+
+            described = describe(exc)
+            why = described[1] if described else f"{type(exc).__name__}: {exc}"
+            self.run.update(state="failed", error=one_line(why))
+            return
+        out = task.result()
+        self.run.update(
+            state="ended", ended=out.get("ended"), wall_s=out.get("wall_s"),
+            not_ready=out.get("not_ready"), episodes=out.get("episodes", []),
+        )  # fmt: skip
 
 
 def build_server(service: SwarmService) -> MCPServer[Any]:
-    server: MCPServer[Any] = MCPServer(
+    server = AgentServer(
         service.opts.name,
         instructions=(
             "An AeroWeaver swarm: each UAV's daemon decides for itself. Read the resources to "
             "see it. Acting tools (start_mission, stop_mission, approve_action) answer first "
-            "with what they will do and a confirm phrase; call again with confirm set to that "
-            "phrase and the operator token to do it."
+            "with what they will do and a confirm phrase (after checking what the real call "
+            "checks); call again with confirm set to that phrase and the operator token to do "
+            "it. A refusal or failure is a tool error whose text says why."
         ),
     )
 
@@ -231,9 +328,12 @@ def build_server(service: SwarmService) -> MCPServer[Any]:
 
     @server.resource("aeroweaver://mission", mime_type="application/json")
     def mission() -> dict[str, Any]:
-        """The mission context and each UAV's role, local goal and active skills."""
+        """The mission context and each UAV's role, local goal and active skills; ``run``:
+        the mission this server started (state, how it ended, episodes, or why it failed)."""
         m = service.store.meta
-        return {k: m.get(k) for k in ("mission", "task", "roles", "goals", "skills")}
+        out = {k: m.get(k) for k in ("mission", "task", "roles", "goals", "skills")}
+        out["run"] = dict(service.run) or None
+        return out
 
     @server.resource("aeroweaver://decisions/last", mime_type="application/json")
     def last_decisions() -> dict[str, Any]:
@@ -246,94 +346,80 @@ def build_server(service: SwarmService) -> MCPServer[Any]:
 
     @server.resource("aeroweaver://approvals", mime_type="application/json")
     def approvals() -> dict[str, Any]:
-        """Per UAV: approval level, vehicle actions waiting for an operator, records."""
+        """Per UAV: approval level, vehicle actions waiting for an operator (``action``:
+        takeoff, land or return_home; ``skill``: the skill that asked), records."""
         return dict(service.store.approvals)
+
+    @server.resource("aeroweaver://tasks", mime_type="application/json")
+    def tasks() -> dict[str, Any]:
+        """The tasks a mission text can name (plan_mission), each with an example text."""
+        from aeroweaver_edge.tasks import specs
+
+        return {n: {"title": s.title, "summary": s.summary, "example": s.mission_text}
+                for n, s in specs().items()}  # fmt: skip
 
     @server.tool()
     async def plan_mission(text: str) -> dict[str, Any]:
         """Plan a mission from natural-language text against the UAVs that are up and show
         the plan (task, roles, local goals, active skills). Changes nothing: start it with
-        start_mission(plan_id, confirm=...)."""
-        try:
-            return await service.plan(text)
-        except OperatorError as exc:
-            return {"error": str(exc)}
+        start_mission(plan_id, confirm=...). Known tasks: resource aeroweaver://tasks."""
+        return await service.plan(text)
 
     @server.tool()
     async def start_mission(
         plan_id: str, confirm: str = "", operator_token: str = ""
     ) -> dict[str, Any]:
         """Start a planned mission: this server becomes its Commander (publishes context and
-        assignments). Without confirm it only says what it will do."""
-        plan = service.plans.get(plan_id)
-        if plan is None:
-            return {"error": f"unknown plan {plan_id!r}: call plan_mission first"}
+        assignments). Without confirm it checks and says what it will do."""
+        plan = service.known_plan(plan_id)
         phrase = f"start {plan_id}"
         if confirm != phrase:
+            await service.check_start(plan)
             return {"done": False, "will": service.describe_start(plan), "confirm": phrase}
-        why = service.authorised(operator_token)
-        if why is not None:
-            return {"done": False, "error": why}
-        try:
-            return {"done": True, **await service.start_mission(plan)}
-        except (UserError, TimeoutError) as exc:  # e.g. no Commander identity for the session
-            return {"done": False, "error": str(exc) or "the mission did not start in time"}
+        service.check_token(operator_token)
+        return {"done": True, **await service.start_mission(plan)}
 
     @server.tool()
     async def stop_mission(
         confirm: str = "", reason: str = "", operator_token: str = ""
     ) -> dict[str, Any]:
         """Stop the current mission through its Commander: every UAV holds, then lands or
-        returns home as configured. Without confirm it only says what it will do."""
-        try:
-            plan = await service.op.plan_stop()
-        except OperatorError as exc:
-            return {"done": False, "error": str(exc)}
+        returns home as configured. Without confirm it checks and says what it will do."""
+        service.check_acting()
+        plan = await service.op.plan_stop()
         phrase = f"stop {plan.mission_id}"
         if confirm != phrase:
             return {"done": False, "will": plan.describe(), "confirm": phrase}
-        why = service.authorised(operator_token)
-        if why is not None:
-            return {"done": False, "error": why}
-        try:
-            note = await service.op.stop(plan, reason)
-        except OperatorError as exc:
-            return {"done": False, "error": str(exc)}
+        service.check_token(operator_token)
+        note = await service.op.stop(plan, reason)
         return {"done": True, "stopped": plan.mission_id, "commander": note}
 
     @server.tool()
     async def approve_action(
         uav: str,
-        action: Literal["take_off", "land", "return_home"],
+        action: VehicleActionKind,
         ttl_s: float = 300.0,
         confirm: str = "",
         operator_token: str = "",
     ) -> dict[str, Any]:
-        """Approve a vehicle action (take off, land, return home) for one UAV; it checks
-        the approval, records it and it expires after ttl_s. Without confirm it only shows
+        """Approve a vehicle action (takeoff, land, return_home) for one UAV; it checks the
+        approval, records it and it expires after ttl_s. Without confirm it checks and shows
         what is pending and what it will do."""
-        kind = parse_action(action)
-        if not 0 < ttl_s <= 86_400:
-            return {"done": False, "error": "ttl_s must be within (0, 86400] seconds"}
-        phrase = f"approve {uav} {SKILL_OF[kind]}"
+        await service.check_approve(uav, ttl_s)
+        phrase = approve_phrase(uav, action)
         if confirm != phrase:
             status = service.store.approvals.get(uav)
             return {
                 "done": False,
-                "will": f"send {uav} an operator approval to {kind} within {ttl_s:g} s of "
+                "will": f"send {uav} an operator approval to {action} within {ttl_s:g} s of "
                 "receipt; the UAV checks the sender, records it and uses it as its "
                 "approval level says",
                 "pending": status["pending"] if status else [],
                 "level": status["level"] if status else None,
                 "confirm": phrase,
             }
-        why = service.authorised(operator_token)
-        if why is not None:
-            return {"done": False, "error": why}
-        try:
-            rec = await service.op.approve(uav, kind, ttl_s)
-        except OperatorError as exc:
-            return {"done": False, "error": str(exc)}
+        service.check_token(operator_token)
+        rec = await service.op.approve(uav, action, ttl_s)
         return {"done": True, "approval": record_dict(rec)}
 
     @server.tool()

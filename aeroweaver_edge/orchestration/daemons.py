@@ -11,14 +11,32 @@ import asyncio
 import contextlib
 import os
 import sys
+from collections.abc import Awaitable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.run_dir import ENV_DIR, ENV_PARENT, LOCK_NAME
 
 if TYPE_CHECKING:
     from aeroweaver_edge.skills import SkillRegistry
+
+T = TypeVar("T")
+FAILURE_POLL_S = 0.1
+
+
+class DaemonsFailed(RuntimeError):
+    """Daemons ended while the run was waiting for them; the message is one line per
+    daemon: its exit status (or exception type) and the last line it wrote."""
+
+    def __init__(self, failed: dict[str, str]) -> None:
+        self.failed = failed
+        parts = []
+        for uav, why in sorted(failed.items()):
+            head, _, rest = why.partition(": ")
+            lines = [ln.strip() for ln in rest.splitlines() if ln.strip()]
+            parts.append(f"{uav} ({head}): {lines[-1] if lines else rest.strip()}")
+        super().__init__("; ".join(parts))
 
 
 def peak_rss_kb(pid: int) -> int | None:
@@ -133,6 +151,34 @@ class DaemonSet:
                 out[uav] = f"exit {p.returncode}: {tail}"
         return out
 
+    async def unless_one_fails(self, aw: Awaitable[T]) -> T:
+        """``aw``'s result, or DaemonsFailed as soon as a daemon has failed: a daemon that
+        exits at start-up (a bad memory path, a full disk) is reported within
+        ``FAILURE_POLL_S`` of its exit, not after the whole start-up wait."""
+        task = asyncio.ensure_future(aw)
+        try:
+            while not task.done():
+                failed = self.failed()
+                if failed:
+                    raise DaemonsFailed(failed)
+                await asyncio.wait({task}, timeout=FAILURE_POLL_S)
+            return task.result()
+        finally:
+            if not task.done():
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
+
+    def terminate(self) -> None:
+        """Ask every daemon still running to stop now (SIGTERM: it holds, closes its
+        session, exits 0; a task is cancelled), so that ``stop`` does not wait its whole
+        timeout for daemons nobody will ever give a mission (a failed start-up)."""
+        for p in self.procs.values():
+            if p.returncode is None:
+                with contextlib.suppress(ProcessLookupError):
+                    p.terminate()
+        for t in self.tasks.values():
+            t.cancel()
+
     async def stop(self, timeout_s: float = 15.0) -> None:
         waits = [*self.tasks.values()]
         with contextlib.suppress(TimeoutError):
@@ -149,4 +195,4 @@ class DaemonSet:
                 await p.wait()
 
 
-__all__ = ["DaemonSet", "peak_rss_kb"]
+__all__ = ["DaemonSet", "DaemonsFailed", "peak_rss_kb"]

@@ -42,7 +42,7 @@ from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.barrier import DEFAULT_TIMEOUT_S as BARRIER_TIMEOUT_S
 from aeroweaver_edge.orchestration.barrier import ExperienceBarrier
-from aeroweaver_edge.orchestration.daemons import DaemonSet
+from aeroweaver_edge.orchestration.daemons import DaemonSet, DaemonsFailed
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, seed_role_slots, shared_llm
 from aeroweaver_edge.orchestration.network import RunNetwork, run_network
 from aeroweaver_edge.orchestration.network import free_port as free_port
@@ -525,14 +525,20 @@ async def run_swarm(
 
         # Start-up is CPU-bound (each process imports the runtime): allow for a loaded machine.
         wait_s = (20.0 + 3.0 * len(uavs)) if opts.processes else (30.0 + 0.5 * len(uavs))
-        missing = await runner.wait_alive(uavs, wait_s)
-        if missing:
-            raise RunFailed(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
-        commander.publish(plan)
-        board_ref["board"] = commander.board
-        missing = await commander.wait_ready(plan.participants, wait_s)
-        if missing:
-            raise RunFailed(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
+        try:  # a daemon that exits at start-up is reported at once, with its own line
+            missing = await daemons.unless_one_fails(runner.wait_alive(uavs, wait_s))
+            if missing:
+                raise RunFailed(f"daemons not up: {sorted(missing)}; {daemons.failed()}")
+            commander.publish(plan)
+            board_ref["board"] = commander.board
+            ready = commander.wait_ready(plan.participants, wait_s)
+            missing = await daemons.unless_one_fails(ready)
+            if missing:
+                raise RunFailed(f"daemons not ready: {sorted(missing)}; {daemons.failed()}")
+        except DaemonsFailed as exc:
+            runner.shutdown()  # the run is over: the others are not "lost"
+            daemons.terminate()  # and would wait for a mission until stop's timeout
+            raise RunFailed(f"daemon failed at start-up: {exc}") from None
         if pin_slots and opts.baseline == "none":  # best effort: needs llama-server slot files
             await seed_role_slots(llm, plan, uavs, n_slots, history=opts.history_rounds > 0)
 

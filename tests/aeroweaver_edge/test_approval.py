@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+from typing import get_args
+
 import pytest
 
 from aeroweaver_edge.actions import VehicleAction
-from aeroweaver_edge.approval import ApprovalGate, parse_action
+from aeroweaver_edge.approval import (
+    ACTION_ALIASES,
+    ACTIONS,
+    ApprovalGate,
+    approve_phrase,
+    parse_action,
+)
 from aeroweaver_edge.config import ApprovalConfig, ConfigError, parse_config
-from aeroweaver_edge.wire import Approval, Header
+from aeroweaver_edge.wire import Approval, Header, VehicleActionKind
 
 TAKEOFF = VehicleAction("takeoff")
 LAND = VehicleAction("land")
@@ -167,12 +175,28 @@ def test_status_changes_are_announced() -> None:
 
 @pytest.mark.parametrize(
     ("text", "kind"),
-    [("take_off", "takeoff"), ("takeoff", "takeoff"), ("LAND", "land"), ("return", "return_home")],
-)
+    [("takeoff", "takeoff"), ("LAND", "land"), (" return_home ", "return_home"),
+     ("take_off", "takeoff")],  # the skill's name: an input alias, never written
+)  # fmt: skip
 def test_parse_action(text: str, kind: str) -> None:
     assert parse_action(text) == kind
 
 
-def test_parse_action_names_the_choices() -> None:
-    with pytest.raises(ValueError, match="take_off, land or return_home"):
-        parse_action("arm")
+@pytest.mark.parametrize("text", ["arm", "return", "take off", ""])
+def test_parse_action_names_the_choices(text: str) -> None:
+    with pytest.raises(ValueError, match=f"^unknown vehicle action {text!r}; choose takeoff, "
+                       "land or return_home$"):  # fmt: skip
+        parse_action(text)
+
+
+def test_every_action_has_one_spelling_and_it_is_the_wire_s() -> None:
+    assert set(ACTIONS) == set(get_args(VehicleActionKind))
+    assert set(ACTION_ALIASES.values()) <= set(ACTIONS)
+    assert not set(ACTION_ALIASES) & set(ACTIONS)
+    assert [approve_phrase("uav0", a) for a in ACTIONS] == [
+        "approve uav0 takeoff", "approve uav0 land", "approve uav0 return_home"]  # fmt: skip
+    # the gate records and announces the canonical action, whichever skill asked
+    g, _clock = gate()
+    g.offer("take_off")
+    assert [(p.action, p.skill) for p in g.pending()] == [("takeoff", "take_off")]
+    assert g.receive(approval()).action == "takeoff"

@@ -144,7 +144,7 @@ async def test_approve_cli_reaches_a_uav_and_reports_refusals() -> None:
         assert "uav1 refused the approval: for mission m9, flying coverage-s1" in err
         code, _out, err = await approve("--uav", "uav1", "--action", "arm")
         assert code == 2
-        assert "unknown vehicle action 'arm'; choose take_off, land or return_home" in err
+        assert "unknown vehicle action 'arm'; choose takeoff, land or return_home" in err
         code, _out, err = await approve("--uav", "uav7", "--action", "land", "--wait", "1")
         assert code == 2
         assert "uav7 is not on the mesh (waited 1 s)" in err

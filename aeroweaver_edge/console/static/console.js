@@ -393,10 +393,9 @@ async function askStop() {
 }
 
 function askApprove(uav, action) {
-  const skill = { takeoff: "take_off", land: "land", return_home: "return_home" }[action] || action;
-  const phrase = `approve ${uav} ${skill}`;
+  const phrase = `approve ${uav} ${action}`;  // one spelling: takeoff, land, return_home
   confirmDialog(`Allow ${uav} to ${action.replace("_", " ")} (the UAV checks the approval and records it; it expires).`, phrase, true,
-    (text, ttl) => post("/api/operator/approve", { uav, action: skill, ttl_s: ttl, confirm: text }));
+    (text, ttl) => post("/api/operator/approve", { uav, action, ttl_s: ttl, confirm: text }));
 }
 
 // -- wiring -----------------------------------------------------------------------------

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.sim.emulator import ftp, texts
 from aeroweaver_edge.sim.emulator.defaults import ARDUPILOT_PARAMS, PX4_PARAMS, TELEMETRY_S
 from aeroweaver_edge.sim.emulator.telemetry import encode
 from aeroweaver_edge.vehicle.mavlink.codec import AUTOPILOT_COMPID, Codec, Message, mavlink
@@ -41,6 +42,9 @@ DUPLICATE_WINDOW_S = 5.0
 IGNORE_POSITION = 0x7  # type_mask bits: x, y, z ignored
 IGNORE_VELOCITY = 0x38  # vx, vy, vz ignored
 FORCE_DISARM = 21196.0
+CHANGE_MODE = R.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
+GUIDED_REQUEST = 2  # MISSION_ITEM_INT.current: ArduPilot's "fly here in GUIDED"
+TEXT_LEN = 50  # STATUSTEXT.text; longer texts go out in chunks sharing an id
 
 
 @dataclass
@@ -160,6 +164,9 @@ class EmulatedAutopilot:
         self._slow: list[tuple[float, int, tuple[int, int]]] = []  # (due, command, src)
         self._last_tick = time.monotonic()
         self._guided_stopped = False
+        self._text_id = 0
+        self.gcs_seen_at: float | None = None  # ArduPilot: last HEARTBEAT from SYSID_MYGCS
+        self.gcs_failsafe = False
 
     # -- helpers ---------------------------------------------------------------------------
 
@@ -248,8 +255,12 @@ class EmulatedAutopilot:
             if kind in ("COMMAND_LONG", "COMMAND_INT"):
                 self.log.append(self._record(msg, None, executed=False))
             return
-        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+        if kind == "HEARTBEAT":
+            self._on_heartbeat(msg)
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             self._on_setpoint(msg)
+        elif kind == "FILE_TRANSFER_PROTOCOL":
+            self._on_ftp(msg)
         elif kind in ("COMMAND_LONG", "COMMAND_INT"):
             self._on_command(msg)
         elif kind == "PARAM_REQUEST_READ":
@@ -284,6 +295,24 @@ class EmulatedAutopilot:
                     msg.mission_type,
                 )
             )
+
+    def _on_heartbeat(self, msg: Message) -> None:
+        if self.p.name == "ardupilot" and msg.get_srcSystem() == int(self.param("SYSID_MYGCS")):
+            self.gcs_seen_at = time.monotonic()
+
+    def _on_ftp(self, msg: Message) -> None:
+        """Answer at once (NAK: no files here) so a GCS falls back without a timeout."""
+        if int(msg.target_component) not in (0, AUTOPILOT_COMPID):
+            return
+        payload = ftp.reply(msg.payload)
+        if payload is None:
+            return
+        self._event(f"ftp opcode {msg.payload[3]} answered")
+        self._send(
+            self.mav.file_transfer_protocol_encode(
+                0, msg.get_srcSystem(), msg.get_srcComponent(), payload
+            )
+        )
 
     # -- offboard setpoints ------------------------------------------------------------------
 
@@ -393,13 +422,16 @@ class EmulatedAutopilot:
         if c == R.MAV_CMD_NAV_TAKEOFF:
             return self._takeoff(p[6])
         if c == R.MAV_CMD_NAV_LAND:
-            return self._land()
+            result = self._land()
+            if result == ACCEPTED and self.p.name == "px4":
+                self._statustext(*texts.PX4_LAND)  # the commander says so for NAV_LAND only
+            return result
         if c == R.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             return self._rtl()
         if c == R.MAV_CMD_DO_SET_MODE:
             return self._do_set_mode(p[0], p[1], p[2])
         if c == R.MAV_CMD_DO_REPOSITION and msg.get_type() == "COMMAND_INT":
-            return self._reposition(int(msg.x), int(msg.y))
+            return self._reposition(int(msg.x), int(msg.y), int(p[1]))
         if c == R.MAV_CMD_SET_MESSAGE_INTERVAL:
             msg_id, interval = int(p[0]), p[1]
             if interval < 0:
@@ -471,6 +503,8 @@ class EmulatedAutopilot:
     def _rtl(self) -> int:
         if self.landed == ON_GROUND:
             return DENIED
+        if self.p.name == "px4" and self.mode != self.p.roles["rtl"]:
+            self._statustext(*texts.px4_rtl_start(self.alt))
         self.set_mode(self.p.roles["rtl"], "return")
         return ACCEPTED
 
@@ -480,6 +514,7 @@ class EmulatedAutopilot:
             return UNSUPPORTED
         role = self.p.role_of(self.p.modes[mode])
         if self.p.name == "px4" and role == "offboard" and not self._stream_recent():
+            self._statustext(*texts.px4_mode_refused(mode))
             return DENIED  # PX4 refuses offboard without a live setpoint stream
         if role == "land":
             return self._land()
@@ -490,12 +525,29 @@ class EmulatedAutopilot:
         self.set_mode(mode, "commanded")
         return ACCEPTED
 
-    def _reposition(self, lat_e7: int, lon_e7: int) -> int:
+    def _reposition(self, lat_e7: int, lon_e7: int, flags: int) -> int:
+        """DO_REPOSITION: PX4 flies there in Hold (AUTO.LOITER); ArduCopter flies there in
+        GUIDED and stays GUIDED, and refuses outside GUIDED unless asked to change mode
+        (``MAV_DO_REPOSITION_FLAGS_CHANGE_MODE``), as ``handle_command_int_do_reposition``."""
         if self.landed != IN_AIR:
             return DENIED
         n, e, _ = self.origin.to_local(lat_e7 / 1e7, lon_e7 / 1e7, self.origin.alt_m)
+        if self.p.name == "ardupilot":
+            return self._guided_goto(n, e, change_mode=bool(flags & CHANGE_MODE))
         self.set_mode(self.p.roles["hold"], "reposition")
         self.goto_target = (n, e)
+        return ACCEPTED
+
+    def _guided_goto(self, n: float, e: float, *, change_mode: bool) -> int:
+        """ArduCopter's GUIDED position target: the vehicle flies there and stays GUIDED."""
+        if self.mode != "GUIDED":
+            if not change_mode:
+                return DENIED
+            self.set_mode("GUIDED", "guided goto")
+        self.setpoint = None  # a position target replaces any velocity target
+        self._guided_stopped = False
+        self.goto_target = (n, e)
+        self._event(f"guided goto N {n:.1f} E {e:.1f}")
         return ACCEPTED
 
     # -- parameters --------------------------------------------------------------------------
@@ -557,6 +609,13 @@ class EmulatedAutopilot:
         self._send(self.mav.mission_request_int_encode(up.src[0], up.src[1], len(up.items), FENCE))
 
     def _on_mission_item(self, msg: Message) -> None:
+        if (
+            self.p.name == "ardupilot"
+            and msg.mission_type == R.MAV_MISSION_TYPE_MISSION
+            and msg.current == GUIDED_REQUEST
+        ):
+            self._on_guided_request(msg)
+            return
         up = self._upload
         if up is None or msg.mission_type != FENCE:
             return
@@ -572,6 +631,22 @@ class EmulatedAutopilot:
         self.breached = False
         self._event(f"fence uploaded: {len(self.fence)} items")
         self._send(self.mav.mission_ack_encode(up.src[0], up.src[1], R.MAV_MISSION_ACCEPTED, FENCE))
+
+    def _on_guided_request(self, msg: Message) -> None:
+        """MAVProxy's ``guided LAT LON ALT``: a MISSION_ITEM_INT with current=2, accepted
+        in GUIDED only (ArduCopter ``do_guided``), answered with a MISSION_ACK."""
+        ok = False
+        if self.mode == "GUIDED" and self.landed == IN_AIR and msg.frame != R.MAV_FRAME_MISSION:
+            lat, lon = int(msg.x) / 1e7, int(msg.y) / 1e7
+            if -90 <= lat <= 90 and -180 <= lon <= 180:
+                n, e, _ = self.origin.to_local(lat, lon, self.origin.alt_m)
+                ok = self._guided_goto(n, e, change_mode=False) == ACCEPTED
+        result = R.MAV_MISSION_ACCEPTED if ok else R.MAV_MISSION_ERROR
+        self._send(
+            self.mav.mission_ack_encode(
+                msg.get_srcSystem(), msg.get_srcComponent(), result, R.MAV_MISSION_TYPE_MISSION
+            )
+        )
 
     def _on_mission_request(self, msg: Message) -> None:
         if msg.mission_type != FENCE or not 0 <= msg.seq < len(self.fence):
@@ -637,7 +712,7 @@ class EmulatedAutopilot:
         self.breached = True
         action = int(self.param(self.p.fence_action_param))
         self._event(f"geofence breach (action {action})")
-        self._statustext(R.MAV_SEVERITY_CRITICAL, "Geofence violated")
+        self._statustext(*(texts.PX4_FAILSAFE if self.p.name == "px4" else texts.AP_FENCE_BREACH))
         if self.p.name == "px4":
             target = {2: "hold", 3: "rtl", 5: "land"}.get(action)
             if action == 4:
@@ -658,7 +733,19 @@ class EmulatedAutopilot:
         self._disarm(f"flight termination: {why}")
 
     def _statustext(self, severity: int, text: str) -> None:
-        self._send(self.mav.statustext_encode(severity, text.encode()[:50]))
+        """One STATUSTEXT, or chunks sharing a non-zero id when longer than 50 bytes
+        (MAVLink 2 convention; the last chunk is shorter than 50 or NUL-terminated)."""
+        self._event(f"statustext {severity}: {text.rstrip()}")
+        raw = text.encode()
+        if len(raw) <= TEXT_LEN:
+            self._send(self.mav.statustext_encode(severity, raw))
+            return
+        self._text_id = self._text_id % 0xFFFF + 1
+        chunks = [raw[i : i + TEXT_LEN] for i in range(0, len(raw), TEXT_LEN)]
+        if len(chunks[-1]) == TEXT_LEN:
+            chunks.append(b"")
+        for seq, chunk in enumerate(chunks):
+            self._send(self.mav.statustext_encode(severity, chunk, self._text_id, seq))
 
     # -- time ------------------------------------------------------------------------------
 
@@ -666,6 +753,7 @@ class EmulatedAutopilot:
         dt = max(0.0, now - self._last_tick) * self.time_scale
         self._last_tick = now
         self._failsafes(now)
+        self._gcs_failsafe(now)
         self._vertical(dt)
         self._guidance()
         self._check_fence()
@@ -693,6 +781,7 @@ class EmulatedAutopilot:
         if self.p.name == "px4" and role == "offboard" and silent > self.param("COM_OF_LOSS_T"):
             action = int(self.param("COM_OBL_RC_ACT"))
             self._event(f"offboard loss after {silent:.2f} s (COM_OBL_RC_ACT={action})")
+            self._statustext(*texts.PX4_FAILSAFE)
             if action == 3:
                 self._rtl()
             elif action == 4:
@@ -712,6 +801,41 @@ class EmulatedAutopilot:
             self._guided_stopped = True  # Copter stops when a velocity target expires
             self._event(f"guided velocity target expired after {silent:.2f} s")
             self.world.hold(self.uav)
+
+    def _gcs_failsafe(self, now: float) -> None:
+        """ArduCopter's GCS failsafe: armed only once SYSID_MYGCS was heard; after
+        FS_GCS_TIMEOUT of silence FS_GCS_ENABLE decides (1, 2: RTL; 3 SmartRTL and 6 Auto
+        RTL, unavailable here: RTL; 4 SmartRTL, unavailable: land; 5: land; 7: brake).
+        The daemon heartbeats with the vehicle's own system id, so it never counts."""
+        if self.p.name != "ardupilot" or self.gcs_seen_at is None:
+            return
+        enable = int(self.param("FS_GCS_ENABLE"))
+        silent = now - self.gcs_seen_at > self.param("FS_GCS_TIMEOUT")
+        if enable == 0 or silent == self.gcs_failsafe:
+            return
+        self.gcs_failsafe = silent
+        if not silent:
+            self._event("GCS failsafe cleared")
+            self._statustext(*texts.AP_GCS_FAILSAFE_CLEARED)
+            return
+        self._event(f"GCS failsafe (FS_GCS_ENABLE={enable})")
+        if self.armed and self.landed == ON_GROUND:
+            self._statustext(*texts.AP_GCS_FAILSAFE_DISARM)
+            self._disarm("GCS failsafe")
+            return
+        self._statustext(*texts.AP_GCS_FAILSAFE)
+        if not self.armed or self.landed != IN_AIR:
+            return
+        # No SMART_RTL mode and no mission here: ArduCopter's fallbacks, with their texts.
+        fallback = texts.AP_FAILSAFE_FALLBACK.get(enable)
+        if fallback is not None:
+            self._statustext(*fallback)
+        if enable in (4, 5):
+            self._land()
+        elif enable == 7:
+            self.set_mode("BRAKE", "GCS failsafe")
+        else:
+            self._rtl()
 
     def _vertical(self, dt: float) -> None:
         if self.landed == TAKING_OFF:

@@ -12,6 +12,31 @@ if TYPE_CHECKING:
     from aeroweaver_edge.sim.emulator.autopilot import EmulatedAutopilot
 
 
+# ArduPilot FENCE_TYPE bits: max altitude, circle, polygon (uploaded zones), min altitude.
+FENCE_ALT_MAX, FENCE_CIRCLE, FENCE_POLYGON, FENCE_ALT_MIN = 1, 2, 4, 8
+
+
+def fence_bits(ap: EmulatedAutopilot) -> tuple[bool, bool, bool]:
+    """MAV_SYS_STATUS_GEOFENCE (present, enabled, healthy) as the autopilot reports it.
+
+    ArduPilot (``AC_Fence::sys_status_*`` and ``GCS_MAVLINK::update_sensor_status_flags``):
+    present when a circle or altitude fence is configured in FENCE_TYPE, or the polygon
+    type with zones uploaded; enabled when present, FENCE_ENABLE is set and FENCE_ACTION is
+    not 0 (report only); healthy unless present and breached (so the health bit is set even
+    without a fence). PX4 reports no geofence bit in SYS_STATUS (its health report has no
+    geofence component; a breach is a failsafe and a STATUSTEXT), so all three stay clear.
+    """
+    if ap.p.name != "ardupilot":
+        return False, False, False
+    kinds = int(ap.param("FENCE_TYPE"))
+    present = bool(kinds & (FENCE_ALT_MAX | FENCE_CIRCLE | FENCE_ALT_MIN)) or (
+        bool(kinds & FENCE_POLYGON) and bool(ap.fence)
+    )
+    enabled = present and ap.param("FENCE_ENABLE") >= 1 and int(ap.param("FENCE_ACTION")) != 0
+    healthy = not (present and ap.breached)
+    return present, enabled, healthy
+
+
 def encode(ap: EmulatedAutopilot, msg_id: int) -> Message | None:
     """The telemetry message ``msg_id`` as the autopilot would send it now (None: not one
     it sends)."""
@@ -46,10 +71,14 @@ def encode(ap: EmulatedAutopilot, msg_id: int) -> Message | None:
             | R.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
             | R.MAV_SYS_STATUS_SENSOR_GPS
         )
-        health = sensors | R.MAV_SYS_STATUS_PREARM_CHECK
+        present = enabled = health = sensors | R.MAV_SYS_STATUS_PREARM_CHECK
+        fence_present, fence_enabled, fence_healthy = fence_bits(ap)
+        present |= R.MAV_SYS_STATUS_GEOFENCE * fence_present
+        enabled |= R.MAV_SYS_STATUS_GEOFENCE * fence_enabled
+        health |= R.MAV_SYS_STATUS_GEOFENCE * fence_healthy
         return m.sys_status_encode(
-            sensors | R.MAV_SYS_STATUS_PREARM_CHECK,
-            sensors | R.MAV_SYS_STATUS_PREARM_CHECK,
+            present,
+            enabled,
             health,
             100,
             16_000,

@@ -1,6 +1,8 @@
 """``aeroweaver mcp`` with the official SDK's own client, over streamable HTTP and stdio,
 against running UAV daemons on a real loopback mesh: resources, the plan -> confirm ->
-start flow, approvals, the trace, the stop, and refusals without the operator token."""
+start flow, approvals, the trace, the stop; every refusal and failure is a tool error
+(``isError``) carrying its one line (wrong or missing token, unknown plan or task, a UAV
+not on the mesh, arguments that fail the schema)."""
 
 from __future__ import annotations
 
@@ -46,6 +48,15 @@ async def swarm(tmp_path: Path) -> AsyncIterator[MeshConfig]:
     finally:
         await daemons.stop(timeout_s=0.1)  # no world to end their run: cancel them
         await mesh.aclose()
+
+
+def error(result: Any) -> str:
+    """The one line of a tool error (``isError``)."""
+    assert result.is_error, result
+    [content] = result.content
+    text: str = content.text
+    assert "\n" not in text, text
+    return text
 
 
 def data(result: Any) -> dict[str, Any]:
@@ -99,6 +110,7 @@ async def test_mcp_over_http_plans_starts_approves_and_stops(swarm: MeshConfig) 
             await until(three_up)
             roster = await resource(client, "aeroweaver://roster")
             assert roster["commander"] is False  # nobody commands yet
+            await refusals_are_tool_errors(client)
 
             text = "Cover the three landmarks"
             plan = data(await client.call_tool("plan_mission", {"text": text}))
@@ -109,10 +121,10 @@ async def test_mcp_over_http_plans_starts_approves_and_stops(swarm: MeshConfig) 
             dry = data(await client.call_tool("start_mission", {"plan_id": pid}))
             assert dry["done"] is False
             assert dry["will"].startswith(f"become the Commander of mission {pid} (coverage)")
-            bad = data(await client.call_tool(
+            bad = error(await client.call_tool(
                 "start_mission", {"plan_id": pid, "confirm": dry["confirm"],
                                   "operator_token": "guess"}))  # fmt: skip
-            assert bad == {"done": False, "error": "wrong operator token"}
+            assert bad == "wrong operator token"
             assert (await resource(client, "aeroweaver://mission"))["mission"] is None
             go = data(await client.call_tool(
                 "start_mission", {"plan_id": pid, "confirm": dry["confirm"],
@@ -148,6 +160,9 @@ async def test_mcp_over_http_plans_starts_approves_and_stops(swarm: MeshConfig) 
             assert ok["done"] is True
             assert ok["approval"]["action"] == "land"
             assert ok["approval"]["state"] == "granted"
+            again = await client.call_tool("start_mission", {"plan_id": pid})
+            assert error(again) == f"this server already runs mission {pid}; stop it first " \
+                "(stop_mission)"  # fmt: skip
 
             stop = data(await client.call_tool("stop_mission", {}))
             assert stop["confirm"] == f"stop {pid}"
@@ -163,6 +178,38 @@ async def test_mcp_over_http_plans_starts_approves_and_stops(swarm: MeshConfig) 
         server.cancel()
         with pytest.raises(asyncio.CancelledError):
             await server
+
+
+async def refusals_are_tool_errors(client: Client) -> None:
+    """Each refusal or failure, before anything is started: isError and its one line."""
+    tools = {t.name: t for t in (await client.list_tools()).tools}
+    assert tools["approve_action"].input_schema["properties"]["action"]["enum"] == [
+        "takeoff", "land", "return_home"]  # fmt: skip
+    moon = error(await client.call_tool("plan_mission", {"text": "Juggle the moon"}))
+    assert moon.startswith("cannot understand the mission: no task type recognised in "
+                           "'Juggle the moon'; known tasks: coverage, ")  # fmt: skip
+    tasks = await resource(client, "aeroweaver://tasks")
+    assert moon.endswith(", ".join(tasks))  # every known task, in the resource's order
+    assert tasks["coverage"]["example"]
+    assert error(await client.call_tool("plan_mission", {})) == (
+        "invalid arguments for plan_mission: text: Field required")  # fmt: skip
+    arm = error(await client.call_tool("approve_action", {"uav": "uav0", "action": "arm"}))
+    assert arm == ("invalid arguments for approve_action: action: Input should be 'takeoff', "
+                   "'land' or 'return_home' (got 'arm')")  # fmt: skip
+    ttl: dict[str, Any] = {"uav": "uav0", "action": "land", "ttl_s": "soon"}
+    assert error(await client.call_tool("approve_action", ttl)) == (
+        "invalid arguments for approve_action: ttl_s: Input should be a valid number, unable "
+        "to parse string as a number (got 'soon')")  # fmt: skip
+    ttl["ttl_s"] = 0
+    assert error(await client.call_tool("approve_action", ttl)) == (
+        "ttl_s 0: must be within (0, 86400] seconds")  # fmt: skip
+    away = error(await client.call_tool("approve_action", {"uav": "uav7", "action": "land"}))
+    assert away == "uav7 is not on the mesh (UAVs up: uav0, uav1, uav2)"
+    nope = error(await client.call_tool("start_mission", {"plan_id": "nope"}))
+    assert nope == "unknown plan 'nope' (planned here: none yet); call plan_mission first"
+    stop = error(await client.call_tool("stop_mission", {}))
+    assert stop == "the Commander is not on the mesh (waited 3 s)"
+    assert error(await client.call_tool("fly_to_the_moon", {})) == "Unknown tool: fly_to_the_moon"
 
 
 async def test_mcp_over_stdio_is_read_only_without_a_token(swarm: MeshConfig) -> None:
@@ -183,12 +230,14 @@ async def test_mcp_over_stdio_is_read_only_without_a_token(swarm: MeshConfig) ->
         await until(three_up)
         plan = data(await client.call_tool("plan_mission", {"text": "Form a circle"}))
         assert plan["plan"]["task"] == "circular_formation"
-        go = data(await client.call_tool(
+        read_only = "this MCP server is read-only: no operator token is configured"
+        go = await client.call_tool(
             "start_mission", {"plan_id": plan["plan_id"], "confirm": plan["confirm"],
-                              "operator_token": "anything"}))  # fmt: skip
-        assert go == {
-            "done": False,
-            "error": "this MCP server is read-only: no operator token is configured",
-        }
-        stop = data(await client.call_tool("stop_mission", {}))
-        assert stop == {"done": False, "error": "the Commander is not on the mesh (waited 3 s)"}
+                              "operator_token": "anything"})  # fmt: skip
+        assert error(go) == read_only
+        # a dry run never promises what the real call refuses
+        dry = await client.call_tool("start_mission", {"plan_id": plan["plan_id"]})
+        assert error(dry) == read_only
+        assert error(await client.call_tool("stop_mission", {})) == read_only
+        ask = await client.call_tool("approve_action", {"uav": "uav0", "action": "land"})
+        assert error(ask) == read_only
