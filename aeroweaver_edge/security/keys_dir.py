@@ -107,7 +107,7 @@ def resolve_swarm(flag: str | None, keys: SwarmDir | None) -> str:
     if flag is not None and flag != keys.swarm:
         raise ConfigError(
             f"--keys {keys.pki.root} is for swarm {keys.swarm!r}, not {flag!r}",
-            f"drop --swarm (the directory says {keys.swarm}) or pass --swarm {keys.swarm}",
+            f"pass --swarm {keys.swarm} (or drop --swarm: the directory names its swarm)",
         )
     return keys.swarm
 
