@@ -13,13 +13,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.daemon import DaemonPorts, DaemonStats, UavDaemon
 from aeroweaver_edge.decision_round import RoundOutcome
-from aeroweaver_edge.lifecycle import TokenWatch, run_unless_lost
+from aeroweaver_edge.lifecycle import TokenWatch, cancel_all, run_unless_lost
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.ports import Selector
 from aeroweaver_edge.security.wiring import boot_headers, peer_limits
@@ -93,6 +94,41 @@ def _ports(
     return flight_ports(cfg, mesh, headers)
 
 
+def _vehicle_line(cfg: UavConfig) -> str:
+    v = cfg.vehicle
+    if v.backend == "sim":
+        return "sim (flies in a simulated world: `mission start --sim-world` runs one)"
+    where = f"{v.backend} {v.url}"
+    return f"{where} in a simulated world" if v.sim_world else where
+
+
+async def world_guard(world: TokenWatch, grace_s: float, daemon: UavDaemon) -> None:
+    """A service daemon's watch on the simulated world: hold as soon as its token goes;
+    if it is not back within ``grace_s``, that world is over (``end_world``: the daemon
+    lands and waits for the next one). Never stops the daemon."""
+    clock = daemon.ports.clock
+    end_world = getattr(clock, "end_world", None)
+    who = daemon.uav
+    while True:
+        await world.wait_up()
+        log.info("%s: the simulated world is up", who)
+        await world.wait_gone()
+        gone_at = world.gone_at or time.monotonic()
+        if getattr(clock, "world_over", False):  # it ended (or never flew us): not a loss
+            log.info("%s: the simulated world closed", who)
+            continue
+        if daemon.phases.flying:
+            log.warning("%s: the simulated world went away mid-flight; holding", who)
+        with contextlib.suppress(Exception):
+            await daemon.phases.hold()
+        if await world.wait_back(grace_s - (time.monotonic() - gone_at)):
+            log.warning("%s: the simulated world is back within %g s; carrying on", who, grace_s)
+            continue
+        log.info("%s: the simulated world is gone; its mission is over", who)
+        if end_world is not None:
+            end_world()
+
+
 async def run_daemon(
     cfg: UavConfig,
     *,
@@ -100,8 +136,14 @@ async def run_daemon(
     selector: Selector | None = None,
     on_round: Callable[[RoundOutcome], Awaitable[None]] | None = None,
     on_ready: Callable[[UavDaemon], None] | None = None,
+    service: bool = False,
 ) -> DaemonStats:
-    """Run one daemon until its clock ends the run. Every resource is closed on the way out."""
+    """Run one daemon until its clock ends the run. Every resource is closed on the way out.
+
+    ``service`` (``aeroweaver daemon``): never end by itself. A simulated world that ends
+    or goes away for good is not a failure: the daemon lands, waits for the next world and
+    flies the next mission. Without it (the daemons a simulated run starts), the world's
+    end is the daemon's end, and a world lost for ``vehicle.world_grace_s`` stops it."""
     registry = registry or load_skills()
     async with contextlib.AsyncExitStack() as stack:
         mesh = await Mesh.open(cfg.mesh, node_id=cfg.uav)
@@ -139,14 +181,26 @@ async def run_daemon(
         attach = getattr(ports.perception, "attach", None)
         if attach is not None:  # field perception: peers come from the daemon's beacons
             attach(lambda: daemon.neighbours)
+        log.info(
+            "%s up: swarm %s, vehicle %s, selector %s; waiting for a mission",
+            cfg.uav, cfg.swarm, _vehicle_line(cfg), cfg.agent.selector,
+        )  # fmt: skip
         if on_ready is not None:
             on_ready(daemon)
         if not (cfg.vehicle.backend == "sim" or cfg.vehicle.sim_world):
-            return await daemon.run()  # a field daemon never stops for a lost party
+            return await daemon.run(service=service)  # never stops for a lost party
         # Flying in the simulated world: hold when it goes, stop if it stays gone.
         world = TokenWatch(mesh, Keys(cfg.swarm).alive_world)
         world.start()
         stack.push_async_callback(world.aclose)
+        if service:
+            guard = asyncio.create_task(
+                world_guard(world, cfg.vehicle.world_grace_s, daemon), name=f"{cfg.uav}-world"
+            )
+            try:
+                return await daemon.run(service=True)
+            finally:
+                await cancel_all([guard])
         return await run_unless_lost(
             daemon.run(), world, cfg.vehicle.world_grace_s, hold=daemon.phases.hold, who=cfg.uav
         )

@@ -14,12 +14,14 @@ import logging
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from aeroweaver_edge import defaults
+from aeroweaver_edge import cli_early, defaults, log_setup  # cli_early first: SIGTERM
 from aeroweaver_edge.cli_checks import (
     check_api_key_env,
     check_llm_url,
@@ -46,8 +48,13 @@ from aeroweaver_edge.config import (
     load_config,
     parse_config,
 )
+from aeroweaver_edge.endpoints import endpoint_arg
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
+
+if TYPE_CHECKING:
+    from aeroweaver_edge.daemon import UavDaemon
+    from aeroweaver_edge.security.keys_dir import SwarmDir
 
 
 def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
@@ -161,9 +168,40 @@ def cmd_daemon(args: argparse.Namespace) -> int:
             member.leave()
 
 
+STOP_BOUND_S = 2.0
+
+
+class StopBound:
+    """A stop by signal ends the process within ``bound_s`` of the daemon's own clean-up
+    (hold or land, report, close the link): what may still be running then -- a model
+    loading in a thread that cannot be cancelled, an LLM server finishing a request --
+    holds nothing that matters, and systemd (or the operator) should not wait for it.
+    The flight clean-up itself (``UavDaemon.running``) is never cut short."""
+
+    def __init__(self, bound_s: float) -> None:
+        self.bound_s = bound_s
+        self.daemon: UavDaemon | None = None
+
+    def arm(self, status: int) -> None:
+        threading.Thread(target=self._watch, args=(status,), name="stop-bound", daemon=True).start()
+
+    def _watch(self, status: int) -> None:
+        deadline = time.monotonic() + self.bound_s
+        while time.monotonic() < deadline or (self.daemon is not None and self.daemon.running):
+            time.sleep(0.05)
+        logging.getLogger("aeroweaver").info(
+            "stopping: clean-up still running %.0f s after the stop; exiting now", self.bound_s
+        )
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+
+
 def _daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.app import run_daemon
     from aeroweaver_edge.mesh import build_zenoh_config
+    from aeroweaver_edge.run_dir import ENV_PARENT
     from aeroweaver_edge.systemd_notify import Supervision
 
     cfg = load_config(args.config, UavConfig)
@@ -175,18 +213,25 @@ def _daemon(args: argparse.Namespace) -> int:
         check_llm_url(cfg.llm.base_url, "llm.base_url")
     check_skills()
     supervision = Supervision.from_env()
+    bound = StopBound(STOP_BOUND_S)
 
     async def supervised() -> Any:
-        def ready(daemon: object) -> None:
+        def ready(daemon: UavDaemon) -> None:
+            bound.daemon = daemon
             supervision.ready(f"{cfg.uav} up: mesh open, vehicle link started")
 
         try:
-            return await run_daemon(cfg, on_ready=ready)
+            # A daemon a simulated run started ends with that run's world; any other is a
+            # service: missions come and go, and only a signal stops it.
+            return await run_daemon(cfg, on_ready=ready, service=ENV_PARENT not in os.environ)
         finally:
             await supervision.aclose()
 
     def stopping(signum: int) -> None:
-        supervision.stopping(f"{cfg.uav} stopping on {signal.Signals(signum).name}: holding")
+        line = f"{cfg.uav} stopping on {signal.Signals(signum).name}: holding"
+        logging.getLogger("aeroweaver").info("%s", line)
+        supervision.stopping(line)
+        bound.arm(0 if signum == signal.SIGTERM else 130)
 
     try:
         stats = _run(supervised(), on_signal=stopping)
@@ -205,13 +250,22 @@ def _daemon(args: argparse.Namespace) -> int:
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
     from aeroweaver_edge.mesh import build_zenoh_config
-    from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
-    from aeroweaver_edge.orchestration.view import LiveView, print_mission
+    from aeroweaver_edge.orchestration.mission import (
+        MissionHooks,
+        MissionStartOptions,
+        start_mission,
+    )
+    from aeroweaver_edge.orchestration.view import FieldView, LiveView, print_mission
+    from aeroweaver_edge.security.keys_dir import SwarmDir, resolve_swarm
 
     world_mesh = None
-    if args.keys:
-        mesh, world_mesh = _secured_mission_meshes(args)
+    keys = SwarmDir.open(args.keys) if args.keys else None
+    swarm = resolve_swarm(args.swarm, keys)
+    if keys is not None:
+        mesh, world_mesh = _secured_mission_meshes(args, keys)
     else:
         mesh = parse_config(
             {"listen": args.listen or ["tcp/127.0.0.1:0"], "connect": args.connect or [],
@@ -224,11 +278,28 @@ def cmd_mission(args: argparse.Namespace) -> int:
         check_output_file(Path(args.json), "--json")
     llm = None if args.no_llm else _llm_from_args(args)
     opts = MissionStartOptions(
-        text=args.text, swarm=args.swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
+        text=args.text, swarm=swarm, mesh=mesh, llm=llm, roster_wait_s=args.roster_wait,
         top_k=args.top_k,
         sim_world=args.sim_world, seed=args.seed, episodes=args.episodes,
         max_rounds=args.rounds, world_mesh=world_mesh if args.sim_world else None,
+        lost_grace_s=args.lost_grace, pace_s=args.pace,
     )  # fmt: skip
+    console = Console(highlight=False)
+    field: list[FieldView] = []
+
+    def planned(mission: dict[str, Any]) -> None:
+        # The plan first, then the run: the operator sees who flies what before it flies.
+        print_mission(mission, console)
+        if not args.sim_world:
+            field.append(FieldView(sorted(mission["assignments"]), console))
+        console.print(f"mission {mission['mission_id']} published; flying", markup=False)
+
+    def heard(rep: Any) -> None:
+        if field:
+            field[0].on_report(rep)
+
+    live = LiveView(console)
+    hooks = MissionHooks(on_plan=planned, on_report=heard, on_round=live.on_round)
 
     async def go() -> dict[str, Any]:
         if llm is not None and llm.base_url is None:
@@ -236,61 +307,60 @@ def cmd_mission(args: argparse.Namespace) -> int:
 
             async with EmbeddedServer() as server:
                 local = llm.model_copy(update={"base_url": server.base_url, "model": server.model})
-                return await start_mission(replace(opts, llm=local), LiveView().on_round)
-        return await start_mission(opts, LiveView().on_round)
+                return await start_mission(replace(opts, llm=local), hooks=hooks)
+        return await start_mission(opts, hooks=hooks)
 
     try:
         out = _run(go())
     except Stopped:
         print("aeroweaver: stopped by the operator", file=sys.stderr)
         return 130
-    from rich.console import Console
-
     from aeroweaver_edge.json_out import write_json_file
 
-    print_mission(out["mission"], Console())
-    print(f"mission ended: {out['ended']}; wall {out['wall_s']:.1f} s")
+    print(f"mission {out['mission']['mission_id']} ended: {out['ended']}; "
+          f"wall {out['wall_s']:.1f} s; episodes {len(out['episodes'])}")  # fmt: skip
+    _print_contact(out)
     if args.json:
         write_json_file(Path(args.json), out)
         print(f"mission record written to {args.json}")
+    if out["out_of_contact"]:
+        print(
+            f"aeroweaver: mission ended without contact to {', '.join(out['out_of_contact'])} "
+            "(they hold by themselves, then land or return: [vehicle] on_link_loss); check the "
+            "router and their links",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
-def _secured_mission_meshes(args: argparse.Namespace) -> tuple[MeshConfig, MeshConfig | None]:
-    """``mission start --keys DIR``: the Commander's (and the world's) secured ``[mesh]``
-    from a swarm directory made by ``aeroweaver keys init``."""
-    from aeroweaver_edge.config import ConfigError
-    from aeroweaver_edge.security import render
-    from aeroweaver_edge.security.identity import COMMANDER, WORLD, SwarmPki
-    from aeroweaver_edge.security.pki import PkiError
+def _print_contact(out: dict[str, Any]) -> None:
+    """Lost and rejoined UAVs, and what protected the mission (as ``sim`` prints them)."""
+    lost = out.get("lost_uavs") or {}
+    if lost:
+        where = ", ".join(f"{u} (episode {w[0]}, round {w[1] + 1})" for u, w in lost.items())
+        print(f"lost contact: {where}")
+    if out.get("rejoined_uavs"):
+        print("rejoined: " + ", ".join(f"{u} x{n}" for u, n in out["rejoined_uavs"].items()))
+    sec = out.get("security") or {}
+    on = [k for k in ("tls", "acl", "signed") if sec.get(k)]
+    what = "secured: " + ", ".join(on) if on else "INSECURE (no TLS, ACL or signatures)"
+    print(f"{what}; refused {sec.get('rejected_total', 0)}")
 
-    try:
-        pki = SwarmPki.load(Path(args.keys))
-    except (PkiError, OSError) as exc:
-        raise ConfigError(f"--keys {args.keys}: {exc}") from None
-    if pki.swarm != args.swarm:
-        raise ConfigError(
-            f"--keys {args.keys} is for swarm {pki.swarm!r}, not {args.swarm!r}",
-            f"pass --swarm {pki.swarm}",
-        )
-    out: list[MeshConfig | None] = []
-    for name in (COMMANDER, WORLD):
-        if name not in pki.identities.members:
-            out.append(None)
-            continue
-        try:
-            cfg = render.mesh_config(
-                pki, name, listen=args.listen or ["tls/127.0.0.1:0"], connect=args.connect or [],
-                namespace=args.namespace,
-            )  # fmt: skip
-        except (PkiError, ValueError) as exc:
-            raise ConfigError(f"--keys {args.keys}: {exc}") from None
-        out.append(cfg)
-    cmdr, world = out
-    if cmdr is None:
-        raise ConfigError(f"--keys {args.keys}: no {COMMANDER!r} identity in that swarm")
-    if args.sim_world and world is None:
+
+def _secured_mission_meshes(
+    args: argparse.Namespace, keys: SwarmDir
+) -> tuple[MeshConfig, MeshConfig | None]:
+    """``mission start --keys DIR``: the Commander's (and the world's) secured ``[mesh]``
+    from a swarm directory made by ``aeroweaver keys init`` (flags override its endpoints)."""
+    from aeroweaver_edge.config import ConfigError
+    from aeroweaver_edge.security.identity import COMMANDER, WORLD
+
+    flags = {"listen": args.listen, "connect": args.connect, "namespace": args.namespace}
+    cmdr = keys.mesh(COMMANDER, **flags)
+    if args.sim_world and not keys.has(WORLD):
         raise ConfigError(f"--keys {args.keys}: --sim-world needs the {WORLD!r} identity")
+    world = keys.mesh(WORLD, **flags) if keys.has(WORLD) else None
     return cmdr, world
 
 
@@ -448,7 +518,6 @@ PROBE_EPILOG = (
 
 def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="aeroweaver", description=__doc__.split("\n")[0])
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("sim", help="fly a simulated swarm mission (world + daemons + Commander)")
@@ -571,14 +640,21 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument(
         "text", type=mission_text, help="the mission in natural language (UTF-8, at most 8 KiB)"
     )
-    ms.add_argument("--swarm", default="default")
-    ms.add_argument("--connect", action="append", help="zenoh endpoint of a daemon or router")
-    ms.add_argument("--listen", action="append", help="zenoh endpoint to listen on")
+    ms.add_argument("--swarm", help="swarm id (default: the --keys directory's, else 'default')")
+    ms.add_argument(
+        "--connect", action="append", type=endpoint_arg("connect"),
+        help="zenoh endpoint of a daemon or router (default: the --keys directory's)",
+    )  # fmt: skip
+    ms.add_argument(
+        "--listen", action="append", type=endpoint_arg("listen"),
+        help="zenoh endpoint to listen on",
+    )  # fmt: skip
     ms.add_argument("--namespace", help="zenoh namespace of the swarm")
     ms.add_argument(
         "--keys", metavar="DIR",
         help="secured swarm: the directory from `aeroweaver keys init` (runs as cmdr; the "
-        "sim world as world); endpoints are then tls/",
+        "sim world as world); it names the swarm and the router, so --swarm and --connect "
+        "are not needed; endpoints are then tls/",
     )  # fmt: skip
     ms.add_argument("--roster-wait", type=finite(), default=3.0, help="seconds to discover daemons")
     ms.add_argument("--sim-world", action="store_true", help="also run the kinematic world")
@@ -591,7 +667,18 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument(
         "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"
     )
-    ms.add_argument("--json", metavar="PATH", help="write task record, assignments, outcome")
+    ms.add_argument(
+        "--pace", type=finite(strict=False), default=0.0, metavar="SECONDS",
+        help="with --sim-world: wall-clock floor per round (default 0)",
+    )  # fmt: skip
+    ms.add_argument(
+        "--lost-grace", type=finite(), default=10.0, metavar="SECONDS",
+        help="stop the mission once every UAV has been out of contact this long (default 10)",
+    )  # fmt: skip
+    ms.add_argument(
+        "--json", metavar="PATH",
+        help="write task record, assignments, outcome, lost_uavs, rejoined_uavs, security",
+    )  # fmt: skip
     _add_llm_flags(ms)
     ms.set_defaults(func=cmd_mission)
 
@@ -677,7 +764,32 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("path")
     k.add_argument("--force", action="store_true", help="replace an existing key file")
     k.set_defaults(func=cmd_signing_key)
+    _add_log_flags(p)
     return p
+
+
+def _add_log_flags(top: argparse.ArgumentParser) -> None:
+    """``-v`` and ``--log-level`` on the program and on every (sub)command, so they work
+    before or after it (``aeroweaver daemon --config uav.toml -v``). A subcommand's copy
+    sets the value only when given (``SUPPRESS``), never resetting the program's."""
+    parsers = [top]
+    while parsers:
+        parser = parsers.pop()
+        outer = parser is top
+        parser.add_argument(
+            "-v", "--verbose", action="store_true",
+            default=False if outer else argparse.SUPPRESS,
+            help="debug logging (tracebacks on errors)",
+        )  # fmt: skip
+        parser.add_argument(
+            "--log-level", type=str.upper, choices=log_setup.LEVELS, metavar="LEVEL",
+            default=None if outer else argparse.SUPPRESS,
+            help="DEBUG, INFO, WARNING, ERROR or CRITICAL (default: INFO for daemon and "
+            "router, WARNING otherwise; -v is DEBUG)",
+        )  # fmt: skip
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                parsers.extend(dict.fromkeys(action.choices.values()))
 
 
 BENCH_WHATS = [
@@ -730,11 +842,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         except Exception as exc:
             return report(exc, verbose=verbose)
     args = build_parser().parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-        stream=sys.stderr,
-    )
+    if args.func is not cmd_daemon and signal.getsignal(signal.SIGTERM) is cli_early.exit_early:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the command's own runner handles it
+    log_setup.setup(args.command, verbose=args.verbose, log_level=args.log_level)
     try:
         return int(args.func(args))
     except KeyboardInterrupt:

@@ -18,6 +18,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from aeroweaver_edge.endpoints import endpoint_arg
 from aeroweaver_edge.errors import UserError
 
 CONSOLE_PORT = 8765  # console.server.DEFAULT_PORT (not imported: the web extra is optional)
@@ -37,11 +38,24 @@ def require_extra(extra: str) -> None:
 
 
 def add_mesh_flags(p: argparse.ArgumentParser, identity: str) -> None:
-    p.add_argument("--swarm", default="default", help="swarm id (the aw/<swarm>/ key prefix)")
-    p.add_argument("--connect", action="append", help="zenoh endpoint of a router or a daemon")
-    p.add_argument("--listen", action="append", help="zenoh endpoint to listen on")
+    p.add_argument(
+        "--swarm", help="swarm id, the aw/<swarm>/ key prefix (default: the --keys "
+        "directory's, else 'default')",
+    )  # fmt: skip
+    p.add_argument(
+        "--connect", action="append", type=endpoint_arg("connect"),
+        help="zenoh endpoint of a router or a daemon (default: the --keys directory's)",
+    )  # fmt: skip
+    p.add_argument(
+        "--listen", action="append", type=endpoint_arg("listen"),
+        help="zenoh endpoint to listen on",
+    )  # fmt: skip
     p.add_argument("--namespace", help="zenoh namespace of the swarm")
-    p.add_argument("--keys", metavar="DIR", help="a swarm directory from `aeroweaver keys init`")
+    p.add_argument(
+        "--keys", metavar="DIR",
+        help="a swarm directory from `aeroweaver keys init`: it names the swarm and the "
+        "router, so --swarm and --connect are not needed",
+    )  # fmt: skip
     p.add_argument(
         "--identity", default=identity, help=f"identity in --keys to join as (default {identity})"
     )
@@ -51,10 +65,17 @@ def add_mesh_flags(p: argparse.ArgumentParser, identity: str) -> None:
 
 
 def mesh_from_args(args: argparse.Namespace) -> Any:
-    """The MeshConfig the flags describe; any problem is one ConfigError/UserError."""
+    """The MeshConfig the flags describe; any problem is one ConfigError/UserError. With
+    ``--keys DIR`` the directory supplies the swarm (``args.swarm`` is filled in here when
+    not given) and the endpoints to dial (``security.keys_dir``); a ``--mesh-config`` file
+    with a top-level ``swarm`` (``keys init``'s ``mesh.toml``) supplies the swarm too."""
     from aeroweaver_edge.config import ConfigError, MeshConfig, parse_config
     from aeroweaver_edge.mesh import build_zenoh_config
+    from aeroweaver_edge.security.keys_dir import SwarmDir, resolve_swarm
 
+    keys = SwarmDir.open(args.keys) if args.keys else None
+    flag_swarm = args.swarm
+    args.swarm = resolve_swarm(args.swarm, keys)
     if args.mesh_config:
         path = Path(args.mesh_config)
         try:
@@ -65,23 +86,18 @@ def mesh_from_args(args: argparse.Namespace) -> Any:
         if not isinstance(data, dict) or not isinstance(data.get("mesh"), dict):
             raise ConfigError(f"{path}: no [mesh] table")
         cfg = parse_config(data["mesh"], MeshConfig, f"{path} [mesh]")
+        if flag_swarm is None and keys is None and isinstance(data.get("swarm"), str):
+            args.swarm = data["swarm"]  # a mesh.toml from keys init names its swarm
+    elif keys is not None:
+        cfg = keys.mesh(
+            args.identity, listen=args.listen, connect=args.connect, namespace=args.namespace
+        )
     else:
         fields: dict[str, Any] = {
             "listen": args.listen or ["tcp/127.0.0.1:0"],
             "connect": args.connect or [],
             "namespace": args.namespace,
         }
-        if args.keys:
-            from aeroweaver_edge.security.identity import SwarmPki
-            from aeroweaver_edge.security.pki import PkiError
-
-            try:
-                pki = SwarmPki.load(Path(args.keys))
-                fields["security"] = pki.security_for(args.identity).model_dump()
-            except PkiError as exc:
-                raise ConfigError(f"--keys {args.keys}: {exc}") from None
-            if not args.listen:
-                fields["listen"] = ["tls/127.0.0.1:0"]
         cfg = parse_config(fields, MeshConfig, "mesh flags")
     build_zenoh_config(cfg)  # a bad endpoint or missing key file: an error now, not mid-run
     return cfg

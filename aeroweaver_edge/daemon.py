@@ -31,7 +31,7 @@ from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.decision_round import RoundContext, RoundOutcome, run_round
 from aeroweaver_edge.defaults import ALTITUDE_M, ROUND_S
 from aeroweaver_edge.flight_phases import ApprovalPredicate, FlightPhases
-from aeroweaver_edge.hold_reasons import count_causes
+from aeroweaver_edge.hold_reasons import count_causes, format_counts
 from aeroweaver_edge.inbox import RADIO_DROPS, PeerLimits, within
 from aeroweaver_edge.lifecycle import cancel_all
 from aeroweaver_edge.mesh import MeshError
@@ -146,6 +146,9 @@ class UavDaemon:
         self.memory = memory
         self.mission = MissionState(cfg.uav, track_commander=True)
         self._holding_for_commander = False
+        self.running = False  # inside run(): a stop must let its clean-up hold or land
+        self._logged_mission: str | None = None  # the mission the INFO log last announced
+        self._mission_start_stats: tuple[int, int, dict[str, int]] = (0, 0, {})
         self._need_catch_up = asyncio.Event()
         self.stats = DaemonStats()
         self._peer_link = None
@@ -232,6 +235,8 @@ class UavDaemon:
         async for key, alive in watch:
             if key != self.keys.alive_cmdr:
                 continue
+            if alive != self.mission.commander_is_alive:
+                log.info("%s: Commander %s", self.uav, "up" if alive else "gone")
             self._changed(self.mission.commander_alive, alive)
             if alive:
                 self._need_catch_up.set()
@@ -241,6 +246,7 @@ class UavDaemon:
         update(msg)
         if self.mission.changes != before:
             self._announce()
+            self._log_mission()
 
     def refusals(self) -> tuple[Counter[str], int]:
         """Everything this daemon refused so far by cause (payloads, peers' messages and
@@ -299,9 +305,16 @@ class UavDaemon:
                 invocation="",
                 label=None,
                 held=True,
+                hold_reason=self._waiting_for(),
                 **self._counters(),
             ),
         )
+
+    def _waiting_for(self) -> str | None:
+        """What this daemon waits for before it can fly (a simulated world nobody runs
+        yet), for the Commander to tell the operator; None when nothing."""
+        waiting = getattr(self.ports.clock, "waiting_for", None)
+        return waiting() if waiting is not None else None
 
     async def _pump_experience(self, sub: Subscription[ExperienceRecord]) -> None:
         """Take same-role peers' records as they come (stored at the next round start, in
@@ -375,14 +388,19 @@ class UavDaemon:
                 self._need_catch_up.clear()
                 wait = min(2 * wait, longest)
 
-    async def run(self) -> DaemonStats:
-        """Run until the clock says the run is over (or the task is cancelled)."""
+    async def run(self, *, service: bool = False) -> DaemonStats:
+        """Run until the clock says the run is over (or the task is cancelled). A
+        ``service`` daemon (``aeroweaver daemon``) never ends by itself: when a simulated
+        world ends it lands, forgets that world and waits for the next mission's."""
+        self.running = True
         # Subscribe now, before link.start() declares our liveliness token: a Commander that
         # sees the token may publish at once, and that must reach us.
         context = self.mesh.subscribe(self.keys.context, MissionContext)
         assignment = self.mesh.subscribe(self.keys.assign(self.uav), Assignment)
         commander = self.mesh.watch_liveliness(self.keys.alive_cmdr)
+        peers = self.mesh.watch_liveliness(self.keys.alive_uav("*"))
         self._tasks = [
+            asyncio.create_task(self._pump_peers(peers), name=f"{self.uav}-peers-seen"),
             asyncio.create_task(self._pump_context(context), name=f"{self.uav}-context"),
             asyncio.create_task(self._pump_assignment(assignment), name=f"{self.uav}-assignment"),
             asyncio.create_task(self._pump_commander(commander), name=f"{self.uav}-commander"),
@@ -410,6 +428,8 @@ class UavDaemon:
                 await self._store_shared()
                 if tick is None:
                     self._final_report()
+                    if service and await self._next_world():
+                        continue
                     break
                 view = self.mission.view()
                 # Flight phases: launch once a mission is assigned; land/return when it ends.
@@ -445,7 +465,70 @@ class UavDaemon:
                 await self._approval_link.aclose()
             if self._peer_link is not None:
                 await self._peer_link.aclose()
+            self.running = False
         return self.stats
+
+    async def _next_world(self) -> bool:
+        """The simulated world ended (its shutdown, or it went away for good): land, and
+        wait for the next world with a fresh start (its episodes count from 0 again, so
+        this UAV's experience records go under a new run identity). False when the clock
+        is not a world's (nothing to wait for)."""
+        reset = getattr(self.ports.clock, "next_world", None)
+        if reset is None:
+            return False
+        await self.phases.finish("the simulated world ended")
+        self._log_mission()
+        reset()
+        self._shared.clear()
+        self._last_reward = None
+        if self.rc.history is not None:
+            self.rc.history = InteractionHistory(self.cfg.agent.history_rounds)
+        if self.memory is not None:
+            from aeroweaver_edge.agent.memory import new_run_id
+
+            # Every memory call is awaited by this loop, so none is in flight right now.
+            self.memory.sync.run = new_run_id()
+        log.info("%s: the simulated world ended; idle, waiting for the next mission", self.uav)
+        return True
+
+    async def _pump_peers(self, watch: LivelinessWatch) -> None:
+        """Log the swarm's UAVs as their daemons come and go (for the operator)."""
+        async for key, alive in watch:
+            uav = key.rsplit("/", 1)[-1]
+            if uav != self.uav:
+                log.info("%s: peer %s %s", self.uav, uav, "seen" if alive else "gone")
+
+    def _log_mission(self) -> None:
+        """INFO lines when this UAV's mission starts and ends (the end with its holds by
+        cause), from the view the Commander's payloads make."""
+        view = self.mission.view()
+        now = view.mission_id if view is not None else None
+        if now == self._logged_mission:
+            return
+        s = self.stats
+        if self._logged_mission is not None and not self.mission.commander_lost:
+            rounds, holds, causes = self._mission_start_stats
+            by = {c: n - causes.get(c, 0) for c, n in s.holds_by_cause.items()}
+            ctx = self.mission.context
+            why = next(
+                (c[len("ended: "):] for c in reversed(ctx.constraints) if c.startswith("ended: ")),
+                "",
+            ) if ctx is not None and ctx.state == "ended" else ""
+            log.info(
+                "%s: mission %s ended%s: %d rounds, %d holds%s",
+                self.uav, self._logged_mission, f" ({why})" if why else "",
+                s.rounds - rounds, s.holds - holds,
+                f" ({format_counts(by)})" if any(by.values()) else "",
+            )  # fmt: skip
+        elif self._logged_mission is not None:
+            return  # the Commander went away mid-mission: logged as such, not an end
+        self._logged_mission = now
+        if view is not None:
+            self._mission_start_stats = (s.rounds, s.holds, dict(s.holds_by_cause))
+            log.info(
+                "%s: mission %s (%s): role %s, skills %s",
+                self.uav, view.mission_id, view.task, view.role, ", ".join(view.skills),
+            )  # fmt: skip
 
     def _note_commander_loss(self, view: MissionView | None) -> None:
         """Log once per loss that a flying UAV holds for a vanished Commander."""

@@ -95,6 +95,10 @@ class TokenWatch:
             self._changed.clear()
             await self._changed.wait()
 
+    async def wait_up(self) -> None:
+        """Return once the token is up."""
+        await self._until(lambda: self.alive)
+
     async def wait_gone(self) -> None:
         """Return once the token, having been up, is gone."""
         await self._until(lambda: self.seen and not self.alive)

@@ -98,3 +98,35 @@ def security_fields(
         "missing_messages": runner.missing_messages
         + sum(p.missing_messages for p in board.uavs.values()),
     }
+
+
+def mission_security(
+    cmdr_mesh: Mesh, world_mesh: Mesh, board: ProgressBoard, runner: WorldRunner | None
+) -> dict[str, Any]:
+    """``mission start``'s ``security`` object, shaped like a ``sim`` summary's: with a world
+    run here, exactly ``security_fields``; without one (field), what protected the
+    Commander's session and what the Commander and the daemons refused."""
+    if runner is not None:
+        return security_fields(world_mesh, cmdr_mesh, runner, board)
+    base = cmdr_mesh.security_summary()
+    daemons: Counter[str] = Counter()
+    for p in board.uavs.values():
+        daemons.update(p.rejected)
+    # Not ``board.foreign``: in the field an idle daemon reports every round with no
+    # mission, so reports for no (or another) mission are normal traffic here.
+    commander: Counter[str] = Counter(cmdr_mesh.codec.stats.rejected)
+    total = commander + daemons
+    return {
+        **{k: base[k] for k in ("tls", "mtls", "acl", "signed")},
+        **({"identities_version": base["identities_version"]} if base.get("tls") else {}),
+        "rejected": dict(total.most_common()),
+        "rejected_total": sum(total.values()),
+        "rejected_by_side": {
+            "world": {},
+            "commander": dict(commander.most_common()),
+            "daemons": dict(daemons.most_common()),
+        },
+        "refused_commands": {},
+        "clamped_commands": {},
+        "missing_messages": sum(p.missing_messages for p in board.uavs.values()),
+    }

@@ -11,19 +11,33 @@ from rich.table import Table
 from aeroweaver_edge.hold_reasons import format_counts
 from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.sim.runner import RoundLog
+from aeroweaver_edge.wire import ProgressReport
 from commander.progress import ProgressBoard
+
+LEGEND = (
+    "each round: UAV [role] what it did (HOLD[cause]: it held; 'no report': none came this "
+    "round; absent: its daemon is gone), r = its reward this round, tok = its LLM tokens this "
+    "round; 'goal held N' = consecutive rounds the task's goal has held (the episode completes "
+    "at the task's count); the last figure is the round's wall time"
+)
 
 
 class LiveView:
     """Prints one compact block per round; works on a TTY and in a log file alike. When
     anything was refused since the last round (a forged, malformed or foreign payload or
-    command, by the world or a daemon), one more line says what, where and why."""
+    command, by the world or a daemon), one more line says what, where and why. A legend
+    line comes first."""
 
     def __init__(self, console: Console | None = None) -> None:
         self.console = console or Console(stderr=False, highlight=False)
         self._refused_seen: dict[str, dict[str, int]] = {}  # uav -> cumulative counts seen
+        self._tokens_seen: dict[str, int] = {}  # uav -> cumulative decision tokens seen
+        self._legend = False
 
     async def on_round(self, log: RoundLog, board: ProgressBoard) -> None:
+        if not self._legend:
+            self._legend = True
+            self.console.print(LEGEND, soft_wrap=True, markup=False)
         res = log.result
         parts = []
         for uav in sorted(res.rewards, key=natural):
@@ -37,17 +51,19 @@ class LiveView:
                 and last is not None
                 and (last.episode, last.round) == (log.episode, log.round)
             ):
-                held = f"HOLD[{last.hold_cause or '?'}] " if last.held else ""
+                held = f"HOLD[{last.hold_cause or 'hold'}] " if last.held else ""
                 what = held + last.invocation
-            tokens = rep.prompt_tokens + rep.completion_tokens if rep else 0
+            total = rep.prompt_tokens + rep.completion_tokens if rep else 0
+            tokens = total - self._tokens_seen.get(uav, 0)
+            self._tokens_seen[uav] = total
             role = f"[{rep.role}] " if rep and rep.role else ""
-            tok = f" tok={tokens}" if tokens else ""
-            parts.append(f"{uav} {role}{what or '?'} r={res.rewards[uav]:+.2f}{tok}")
+            tok = f" tok {tokens}" if tokens else ""
+            parts.append(f"{uav} {role}{what or 'no report'} r={res.rewards[uav]:+.2f}{tok}")
         status = f" [{res.reason}]" if res.done else ""
         self.console.print(
             f"ep {log.episode} round {log.round + 1:2d} | "
             + " | ".join(parts)
-            + f" | stable {res.stable_rounds}{status} ({log.wait_s:.2f} s)",
+            + f" | goal held {res.stable_rounds}{status} ({log.wait_s:.2f} s)",
             soft_wrap=True,
             markup=False,
         )
@@ -68,6 +84,55 @@ class LiveView:
             if new:
                 parts.append(f"{uav} {_counts(new)}")
         return "; ".join(parts)
+
+
+class FieldView:
+    """``mission start`` without a simulated world: a line per round of the swarm -- once
+    every UAV in the mission reported a new round, or one reported twice (the others'
+    places then say ``no report``) -- and a line per phase (ready, final). In the field
+    each daemon counts rounds on its own clock, so each UAV's entry carries its round."""
+
+    def __init__(self, participants: list[str], console: Console | None = None) -> None:
+        self.console = console or Console(stderr=False, highlight=False)
+        self.participants = sorted(participants, key=natural)
+        self._pending: dict[str, ProgressReport] = {}
+        self.lines = 0
+
+    def on_report(self, rep: ProgressReport) -> None:
+        if rep.uav not in self.participants:
+            return
+        if rep.phase == "ready":
+            wait = f"; {rep.hold_reason}" if rep.hold_reason else ""
+            self._say(f"{rep.uav} ready as {rep.role or '-'}{wait}")
+            return
+        if rep.phase == "final":
+            self._say(f"{rep.uav} stopped (its last report)")
+            return
+        if rep.phase != "round":
+            return
+        if rep.uav in self._pending:
+            self._flush()
+        self._pending[rep.uav] = rep
+        if len(self._pending) == len(self.participants):
+            self._flush()
+
+    def _flush(self) -> None:
+        parts = []
+        for uav in self.participants:
+            r = self._pending.get(uav)
+            if r is None:
+                parts.append(f"{uav} no report")
+                continue
+            held = f"HOLD[{r.hold_cause or 'hold'}] " if r.held else ""
+            tok = r.prompt_tokens + r.completion_tokens
+            line = f"{uav} r{r.round + 1} {held}{r.invocation or '-'}"
+            parts.append(line + (f" tok {tok}" if tok else ""))
+        self._pending.clear()
+        self.lines += 1
+        self._say(f"round {self.lines:3d} | " + " | ".join(parts))
+
+    def _say(self, line: str) -> None:
+        self.console.print(line, soft_wrap=True, markup=False)
 
 
 def _counts(counts: dict[str, int]) -> str:

@@ -53,7 +53,30 @@ def _import_mavsdk() -> Any:
         ) from None
     if not str(getattr(mavsdk, "__version__", "0")).startswith("4."):
         raise VehicleError(f"mavsdk 4.x required, found {getattr(mavsdk, '__version__', '?')}")
+    _route_mavsdk_log(mavsdk)
     return mavsdk_asyncio
+
+
+MAVSDK_LOG = logging.getLogger("mavsdk")
+_MAVSDK_LEVELS = (logging.DEBUG, logging.DEBUG, logging.WARNING, logging.ERROR)  # its 0..3
+
+
+def _route_mavsdk_log(mavsdk: Any) -> None:
+    """MAVSDK's C library prints its log lines on stdout by itself; send them through
+    Python logging instead (logger ``mavsdk``: its INFO chatter at DEBUG), so the
+    process's log level and handlers decide -- nothing reaches a terminal at --quiet.
+    Called from MAVSDK's own threads; logging is thread-safe."""
+    subscribe = getattr(mavsdk, "log_subscribe", None)
+    if subscribe is None or getattr(_route_mavsdk_log, "done", False):
+        return
+
+    def forward(level: int, message: str, file: str | None, line: int) -> bool:
+        lvl = _MAVSDK_LEVELS[level] if 0 <= int(level) < len(_MAVSDK_LEVELS) else logging.INFO
+        MAVSDK_LOG.log(lvl, "%s", message)
+        return True  # handled: MAVSDK prints nothing itself
+
+    subscribe(forward)
+    _route_mavsdk_log.done = True  # type: ignore[attr-defined]
 
 
 class MavsdkVehicle:

@@ -40,6 +40,9 @@ if TYPE_CHECKING:
     from aeroweaver_edge.mesh import Mesh, Subscription
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
+WAITING_FOR_WORLD = "waiting for a simulated world"
+"""What this UAV's ready report says while no world flies it (``waiting_for``): the
+Commander tells an operator who runs no world at once, instead of watching in silence."""
 WORLD = "world"  # the simulated world's identity (security.identity.WORLD)
 
 
@@ -54,26 +57,73 @@ class SimLink:
         self.uav = uav
         self._headers = headers
         self._reward_wait_s = reward_wait_s
-        # The newest perception not yet taken (None: none), and whether the run is over.
-        self._next: SimPerception | None = None
-        self._over = False
         self._tick_ready = asyncio.Event()
-        self._taken: tuple[int, int] = (-1, -1)  # (episode, round) of the newest perception
+        self._reward_arrived = asyncio.Event()
         self.rejected: Counter[str] = Counter()
         self.superseded = 0  # perceptions replaced by a newer one before the daemon took them
-        self._rewards: list[RewardEvent] = []
-        self._reward_seen: set[tuple[int, int]] = set()
-        self._reward_arrived = asyncio.Event()
-        self._current: SimPerception | None = None
-        self._last_played: tuple[int, int] | None = None
-        self._setpoint: Vec3 = ZERO
-        self._held = True
+        self.worlds = 0  # simulated worlds this link has flown in (a new epoch is a new world)
+        self._world_epoch: int | None = None  # header epoch of the world being flown
+        self._current: SimPerception | None = None  # the perception of the round in play
+        self._reset()
         # Flight phases: the simulated airframe starts disarmed on the ground and goes
         # through arm and take-off like a real one. The world flies it at the fixed flight
         # level either way (take-off happens before the first round), so returns are as before.
         self.armed = False
         self.in_air = False
         self._subs: list[Subscription[Any]] = []
+
+    def _reset(self) -> None:
+        """Forget everything of the current world: the next one starts at episode 0."""
+        # The newest perception not yet taken (None: none), and whether the world is over.
+        self._next: SimPerception | None = None
+        self._over = False
+        self._taken: tuple[int, int] = (-1, -1)  # (episode, round) of the newest perception
+        self._rewards: list[RewardEvent] = []
+        self._reward_seen: set[tuple[int, int]] = set()
+        self._last_played: tuple[int, int] | None = None
+        self._setpoint: Vec3 = ZERO
+        self._held = True
+
+    def next_world(self) -> None:
+        """A service daemon is done with this world (its shutdown, or it went away for
+        good): wait for the next one, whose rounds start again at episode 0."""
+        self._reset()
+        self._world_epoch = None
+
+    def end_world(self) -> None:
+        """The world went away and did not come back: end its rounds here, as its
+        shutdown would (``next_round`` returns None). Nothing to end if no world flew this
+        UAV since the last ``next_world``."""
+        if self._world_epoch is None:
+            return
+        self._over = True
+        self._tick_ready.set()
+        self._reward_arrived.set()
+
+    @property
+    def world_over(self) -> bool:
+        """No world is being flown: none sent this UAV a perception since the last
+        ``next_world``, or the one that did has ended (its shutdown came)."""
+        return self._world_epoch is None or self._over
+
+    def waiting_for(self) -> str | None:
+        """What this link waits for before a round can start, if anything."""
+        return f"{WAITING_FOR_WORLD} (sim backend)" if self.world_over else None
+
+    def _admit_world(self, epoch: int) -> str | None:
+        """Admit a perception's epoch: the current world's, or a new world's (a later
+        session: the previous world ended; its rounds are forgotten and this one starts
+        afresh); an older epoch is an earlier world's (refused). Epochs are boot counters on a
+        signed mesh and start times otherwise (``wire.boot_epoch``), both increasing."""
+        if epoch == self._world_epoch:
+            return None
+        if self._world_epoch is not None:
+            if epoch < self._world_epoch:  # a late payload of an earlier world
+                return "perception_old_world"
+            self._reset()
+        self._world_epoch = epoch
+        self.worlds += 1
+        return None
 
     async def start(self) -> None:
         keys, mesh = self._keys, self._mesh
@@ -106,10 +156,13 @@ class SimLink:
             return "perception_not_world"
         if msg.uav != self.uav:
             return "perception_wrong_uav"
-        if where <= self._taken:
-            return "perception_stale"
         if not all(math.isfinite(x) for x in (*msg.pos, *msg.vel, msg.deadline_s)):
             return "perception_non_finite"
+        why = self._admit_world(msg.h.epoch)
+        if why is not None:
+            return why
+        if where <= self._taken:
+            return "perception_stale"
         self.superseded += self._next is not None  # the daemon fell behind
         self._taken, self._next = where, msg
         self._tick_ready.set()
@@ -128,6 +181,8 @@ class SimLink:
             return "reward_not_world"
         if msg.uav != self.uav:
             return "reward_wrong_uav"
+        if msg.h.epoch != self._world_epoch:
+            return "reward_not_current"  # not the world this UAV flies in now
         if where in self._reward_seen:
             return "reward_duplicate"
         if not self._reward_round(where):
@@ -142,10 +197,13 @@ class SimLink:
         return None
 
     def on_episode(self, msg: SimEpisode) -> str | None:
-        """The world's episode events; only its shutdown ends the run here."""
+        """The world's episode events; only its shutdown ends the world's rounds here (a
+        service daemon then waits for the next world, ``next_world``)."""
         if msg.h.sender != WORLD:
             return "episode_not_world"
         if msg.phase == "shutdown":
+            if self._world_epoch is not None and msg.h.epoch < self._world_epoch:
+                return "episode_old_world"  # an earlier world's, late
             self._over = True
             self._tick_ready.set()
         return None
@@ -178,7 +236,8 @@ class SimLink:
     async def finish(
         self, tick: RoundTick, *, sent: Sequence[MsgRef], guess: str | None = None
     ) -> None:
-        self._last_played = (tick.episode, tick.round)
+        if (tick.episode, tick.round) <= self._taken:  # not a round of a world since forgotten
+            self._last_played = (tick.episode, tick.round)
         self._mesh.put(
             self._keys.sim_command(self.uav),
             SimCommand(

@@ -69,7 +69,7 @@ def cases(tmp: Path, busy_port: int) -> dict[str, Case]:
         ),
         "bad listen endpoint": Case(
             ("mission", "start", "cover", "--no-llm", "--listen", "nonsense"),
-            ("mesh.listen", "nonsense"),
+            ("--listen", "nonsense", "not a Zenoh endpoint"),
         ),
         "bad namespace": Case(
             ("mission", "start", "cover", "--no-llm", "--namespace", "swarm/*"),

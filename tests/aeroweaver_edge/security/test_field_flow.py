@@ -60,11 +60,10 @@ async def wait_for_uavs(keys_dir: Path, router: str, uavs: set[str], timeout_s: 
 def test_provision_start_and_fly_a_secured_mission(tmp_path: Path) -> None:
     keys, port = tmp_path / "keys", free_port()
     router = f"tls/127.0.0.1:{port}"
+    # scripted, so no LLM is needed
     assert main(["keys", "init", "--swarm", SWARM, "--uavs", "2", "--out", str(keys),
-                 "--listen", router, "--connect", router, "--mode", "client"]) == 0  # fmt: skip
-    for uav in ("uav0", "uav1"):  # scripted, so no LLM is needed
-        toml = keys / uav / "uav.toml"
-        toml.write_text(toml.read_text() + '\n[agent]\nselector = "scripted"\nbeta = 0.0\n')
+                 "--listen", router, "--connect", router, "--mode", "client",
+                 "--selector", "scripted"]) == 0  # fmt: skip
     procs = [spawn("router", "--config", str(keys / "router" / "zenoh.json5"),
                    log=tmp_path / "router.log")]  # fmt: skip
     try:
@@ -91,3 +90,36 @@ def test_provision_start_and_fly_a_secured_mission(tmp_path: Path) -> None:
     assert codes == [0, 0, 0]  # SIGTERM is how services stop: a clean exit
     for name in ("uav0", "uav1", "cmdr", "world"):  # every process counted its start
         assert (keys / "state" / f"{name}.boot").read_text() == "1\n"
+
+
+@pytest.mark.slow
+def test_loopback_sim_swarm_flies_with_keys_alone(tmp_path: Path) -> None:
+    """``keys init --loopback --vehicle sim``: distinct ports on one machine, daemons that
+    wait for a simulated world, and ``mission start --keys DIR --sim-world`` with no
+    ``--swarm`` or ``--connect`` (the directory names both)."""
+    keys, port = tmp_path / "keys", free_port()
+    assert main(["keys", "init", "--swarm", SWARM, "--uavs", "2", "--out", str(keys),
+                 "--loopback", "--port", str(port), "--vehicle", "sim",
+                 "--selector", "scripted"]) == 0  # fmt: skip
+    procs = [spawn("router", "--config", str(keys / "router" / "zenoh.json5"),
+                   log=tmp_path / "router.log")]  # fmt: skip
+    try:
+        for uav in ("uav0", "uav1"):
+            procs.append(spawn("daemon", "--config", str(keys / uav / "uav.toml"),
+                               log=tmp_path / f"{uav}.log"))  # fmt: skip
+        router = f"tls/127.0.0.1:{port}"
+        up = asyncio.run(wait_for_uavs(keys, router, {"uav0", "uav1"}, 60.0))
+        assert up, [(tmp_path / f).read_text()[-500:] for f in ("router.log", "uav0.log")]
+        out = tmp_path / "mission.json"
+        code = main(["mission", "start", TEXT, "--keys", str(keys), "--sim-world", "--no-llm",
+                     "--json", str(out)])  # fmt: skip
+        assert code == 0
+        record = json.loads(out.read_text())
+        assert record["roster"] == ["uav0", "uav1"]
+        [episode] = record["episodes"]
+        assert episode["team_return"] == 4.0
+    finally:
+        for p in procs:
+            p.send_signal(signal.SIGTERM)
+        codes = [p.wait(timeout=30) for p in procs]
+    assert codes == [0, 0, 0]

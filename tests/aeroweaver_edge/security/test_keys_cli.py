@@ -77,59 +77,80 @@ def test_keys_show_and_rotate(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert "uav0" in table
 
 
+def cli(argv: list[str]) -> int:
+    """``main`` as the shell sees it: argparse's usage errors are exit status 2 too."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+
+
+INIT = ["keys", "init", "--swarm", "x", "--uavs", "1", "--out"]
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["keys", "init", "--swarm", "x", "--uavs", "0", "--out", "{d}/a"], "at least 1"),
+        ([*INIT[:5], "0", "--out", "{d}/a"], "0 is out of range (1..50)"),
+        ([*INIT[:5], "100000", "--out", "{d}/a"], "100000 is out of range (1..50)"),
         (["keys", "init", "--swarm", "Bad!", "--uavs", "1", "--out", "{d}/b"], "swarm id"),
-        (["keys", "init", "--swarm", "x", "--uavs", "1", "--out", "{d}/full"], "not empty"),
-        (
-            ["keys", "init", "--swarm", "x", "--uavs", "1", "--out", "{d}/c", "--host", "uav5=h"],
-            "unknown identities: uav5",
-        ),
-        (
-            [
-                "keys",
-                "init",
-                "--swarm",
-                "x",
-                "--uavs",
-                "1",
-                "--out",
-                "{d}/e",
-                "--listen",
-                "tcp/0.0.0.0:1",
-            ],
-            "endpoints are tls/",
-        ),
+        ([*INIT, "{d}/full"], "is not empty"),
+        ([*INIT, "{d}/file"], "exists and is not a plain directory"),
+        ([*INIT, "{d}/c", "--host", "uav5=10.0.0.5"], "no identity 'uav5'"),
+        ([*INIT, "{d}/c", "--host", "uav0=not an addr!"], "not an IP address or a DNS name"),
+        ([*INIT, "{d}/c", "--host", "under_score.example"], "not an IP address or a DNS name"),
+        ([*INIT, "{d}/c", "--days", "0"], "0 is out of range"),
+        ([*INIT, "{d}/c", "--days", "-5"], "-5 is out of range"),
+        ([*INIT, "{d}/c", "--ca-days", "0"], "0 is out of range"),
+        ([*INIT, "{d}/e", "--listen", "tcp/0.0.0.0:1"], "endpoints are tls/"),
+        ([*INIT, "{d}/e", "--connect", "tls/127.0.0.1:99999"], "port 99999 is outside 1..65535"),
+        ([*INIT, "{d}/e", "--listen", "tls/127.0.0.1:70000"], "port 70000 is outside 0..65535"),
+        ([*INIT, "{d}/e", "--connect", "tlz/10.0.0.1:7447"], "unknown protocol 'tlz'"),
+        ([*INIT, "{d}/e", "--connect", "tls/10.0.0.1"], "expected host:port"),
+        ([*INIT, "{d}/e", "--vehicle", "emulator"], "add --loopback"),
+        ([*INIT, "{d}/e", "--loopback", "--connect", "tls/1.2.3.4:7447"], "--loopback sets"),
+        ([*INIT, "{d}/e", "--loopback", "--no-router"], "drop --no-router"),
+        ([*INIT, "{d}/e", "--loopback", "--port", "65535"], "past 65535"),
+        ([*INIT, "{d}/e", "--vehicle", "mavlink", "--vehicle-port", "65535", "--uavs", "2"],
+         "past 65535"),
         (["keys", "show", "--dir", "{d}/nothing"], "no identities.json"),
         (["keys", "rotate", "--dir", "{d}/nothing", "--identity", "uav0"], "no identities.json"),
         (["router", "--config", "{d}/none.json5"], "no such file"),
         (
-            [
-                "mission",
-                "start",
-                "Cover the landmarks",
-                "--no-llm",
-                "--connect",
-                "tcp/10.0.0.2:7447",
-            ],
+            ["mission", "start", "Cover the landmarks", "--no-llm", "--connect",
+             "tcp/10.0.0.2:7447"],
             "plain link off this machine",
         ),
+        (
+            ["mission", "start", "Cover the landmarks", "--no-llm", "--connect",
+             "tcp/127.0.0.1:99999"],
+            "port 99999 is outside 1..65535",
+        ),
+        (
+            ["mission", "start", "Cover the landmarks", "--no-llm", "--listen",
+             "tcp/127.0.0.1:x"],
+            "port 'x' is not a number",
+        ),
+        (["console", "--connect", "tcp/127.0.0.1:0"], "port 0 is outside 1..65535"),
+        (["mcp", "--connect", "udp/[::1:7447"], "IPv6"),
     ],
-)
+)  # fmt: skip
 def test_operator_mistakes_are_one_line_and_exit_2(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
 ) -> None:
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "x").write_text("keep me")
-    rc = main([a.replace("{d}", str(tmp_path)) for a in argv])
+    (tmp_path / "file").write_text("a file")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    rc = cli([a.replace("{d}", str(tmp_path)) for a in argv])
     err = capsys.readouterr().err
     assert rc == 2
     assert message in err
     assert err.count("\n") == 1
     assert "Traceback" not in err
     assert (tmp_path / "full" / "x").read_text() == "keep me"
+    assert (tmp_path / "file").read_text() == "a file"
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written, no temp dir
 
 
 @pytest.mark.parametrize(
