@@ -27,6 +27,7 @@ from pydantic import (
 )
 
 from aeroweaver_edge import defaults as d
+from aeroweaver_edge.endpoints import endpoint_problem
 from aeroweaver_edge.errors import UserError
 
 _ID_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_-")
@@ -123,22 +124,6 @@ def endpoint_is_loopback(endpoint: str) -> bool:
         return False  # a host name: it may resolve anywhere
 
 
-_PORT_PROTOCOLS = frozenset({"tcp", "udp", "tls", "quic", "ws"})
-
-
-def _port_problem(proto: str, address: str) -> str | None:
-    """What is wrong with the ``host:port`` of an IP endpoint (``None``: nothing)."""
-    if proto not in _PORT_PROTOCOLS:
-        return None
-    hostport = address.split("#", 1)[0].split("?", 1)[0]
-    host, sep, port = hostport.rpartition(":")
-    if not sep or not host.strip("[]"):
-        return "no host:port (e.g. tcp/127.0.0.1:7447)"
-    if not port.isdigit() or not 0 <= int(port) <= 65535:
-        return f"port {port!r} is not a number in 0..65535"
-    return None
-
-
 _PROTECTED_OVERRIDES = ("transport/link/tls", "access_control", "transport/auth")
 
 
@@ -166,13 +151,7 @@ class MeshConfig(_Section):
         for field_name in ("listen", "connect"):
             for i, ep in enumerate(getattr(self, field_name)):
                 where = f"{field_name}[{i}] {ep!r}"
-                proto, _, address = ep.partition("/")
-                if not proto or not address:
-                    raise ValueError(
-                        f"mesh.{where}: not a Zenoh endpoint (expected proto/address, "
-                        "e.g. tcp/127.0.0.1:7447 or tls/10.0.0.2:7447)"
-                    )
-                why = _port_problem(proto, address)
+                why = endpoint_problem(ep, "listen" if field_name == "listen" else "connect")
                 if why is not None:
                     raise ValueError(f"mesh.{where}: {why}")
                 if self.security is not None and not endpoint_is_secure(ep):

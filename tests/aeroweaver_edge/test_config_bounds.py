@@ -240,4 +240,4 @@ def test_mission_start_refuses_a_port_beyond_65535() -> None:
     )  # fmt: skip
     assert proc.returncode == 2, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
-    assert "port '99999'" in proc.stderr
+    assert "port 99999 is outside 1..65535" in proc.stderr
