@@ -521,13 +521,28 @@ def last_chunk(key: str) -> str:
 T = TypeVar("T", bound=msgspec.Struct)
 
 
+BULK_LEAVES: Final = frozenset({"broadcast", "experience", "state", "report", "approval"})
+
+
+def traffic_lane(key_expr: str) -> str:
+    """``"bulk"`` for peer traffic that may come in floods and can wait a little (messages,
+    beacons, experience, reports, approval status); ``"control"`` for the rest (liveliness,
+    the world's perceptions, rewards and commands, the Commander's context and assignments,
+    a central node's answers), which a receiver serves first (``mesh.py``)."""
+    if "/inbox/" in key_expr:
+        return "bulk"
+    return "bulk" if last_chunk(key_expr) in BULK_LEAVES else "control"
+
+
 class DecodeStats:
-    """Counts rejected payloads and keeps the log quiet (one line per reason per interval)."""
+    """Counts rejected payloads and keeps the log quiet (one line per reason per interval).
+    Thread-safe: a Zenoh callback counts what it drops before it reaches the loop."""
 
     def __init__(self, log_interval_s: float = 5.0) -> None:
         self.rejected: Counter[str] = Counter()
         self._interval = log_interval_s
         self._last_log: dict[str, float] = {}
+        self._lock = threading.Lock()
 
     @property
     def total(self) -> int:
@@ -537,17 +552,19 @@ class DecodeStats:
         """Count under ``reason``, a fixed category: payload-derived text goes in ``detail``
         (logged only), so a flood of distinct bad payloads cannot grow the counter or
         defeat the rate limit."""
-        self.rejected[reason] += 1
-        now = time.monotonic()
-        if now - self._last_log.get(reason, -1e9) >= self._interval:
+        with self._lock:
+            self.rejected[reason] += 1
+            now = time.monotonic()
+            if now - self._last_log.get(reason, -1e9) < self._interval:
+                return
             self._last_log[reason] = now
-            log.warning(
-                "dropped payload on %s: %s%s (%d so far)",
-                key,
-                reason,
-                f": {detail[:80]}" if detail else "",
-                self.rejected[reason],
-            )
+        log.warning(
+            "dropped payload on %s: %s%s (%d so far)",
+            key,
+            reason,
+            f": {detail[:80]}" if detail else "",
+            self.rejected[reason],
+        )
 
 
 class Codec:

@@ -1,0 +1,157 @@
+"""Bounded, per-sender fair hand-off from Zenoh's threads to the event loop, and the
+per-sender budget of signature verifications.
+
+Why: one enrolled but compromised UAV could flood its own keys (6-14k msg/s). With one
+``call_soon_threadsafe`` and one Ed25519 verification per sample, the receiving loop fell
+behind without bound, liveliness events queued behind the flood and, once the loop held
+the GIL all the time, Zenoh's RX threads could not hand samples over, links congested and
+closed (the world saw every UAV "leave the swarm" at once). Here:
+
+* ``SenderQueues``: what a callback enqueues, one small FIFO per sender (the signer's key
+  id when secured, else the key), served round robin, so a flooding sender fills only its
+  own FIFO and an honest sender's next sample is never behind more than one of the
+  flooder's. Full means dropped and counted, never blocked, never raised.
+* ``VerifyBudget``: per signer, a token bucket of verifications, refilled per second and
+  per round the owner announces (``Mesh.note_round``); a payload over budget is dropped
+  and counted before any decoding or crypto. Honest senders need a handful per round and
+  a burst of experience records at an episode's end, which ``burst`` covers.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+I = TypeVar("I")  # noqa: E741 - queued item type
+
+MAX_SENDERS = 256
+"""FIFOs one subscription keeps at once: senders beyond it are dropped (a forged-key flood
+cannot grow the table; the identity list of a swarm is far smaller)."""
+
+
+FIFO_MIN = 256
+"""Smallest per-sender FIFO of a subscription (a burst of local puts, or an episode's
+experience records, arrives before the loop runs)."""
+FIFO_BYTES = 4 * 1024 * 1024
+"""Payload bytes one sender may have waiting in one FIFO."""
+
+
+class SenderQueues(Generic[I]):
+    """Per-sender bounded FIFOs served round robin. ``push`` is called from Zenoh threads,
+    ``pop`` from the loop; one lock guards both (held for a few dict/deque operations).
+    Each sender may have ``per_sender`` items and ``max_bytes`` bytes waiting."""
+
+    def __init__(
+        self, per_sender: int, max_senders: int = MAX_SENDERS, max_bytes: int = FIFO_BYTES
+    ) -> None:
+        if per_sender < 1:
+            raise ValueError(f"per_sender must be >= 1, got {per_sender}")
+        self.per_sender = per_sender
+        self.max_senders = max_senders
+        self.max_bytes = max_bytes
+        self._bytes: dict[Hashable, int] = {}
+        self._queues: dict[Hashable, deque[tuple[I, int]]] = {}
+        self._turn: deque[Hashable] = deque()  # senders with something queued, in turn
+        self._lock = threading.Lock()
+        self.size = 0
+
+    def push(self, sender: Hashable, item: I, nbytes: int = 0) -> str | None:
+        """Queue ``item`` (``nbytes`` long); None if queued, else why it was dropped."""
+        with self._lock:
+            q = self._queues.get(sender)
+            if q is None:
+                if len(self._queues) >= self.max_senders:
+                    return "intake_senders"
+                q = self._queues[sender] = deque()
+                self._bytes[sender] = 0
+                self._turn.append(sender)
+            elif len(q) >= self.per_sender or self._bytes[sender] + nbytes > self.max_bytes:
+                return "intake_full"
+            q.append((item, nbytes))
+            self._bytes[sender] += nbytes
+            self.size += 1
+            return None
+
+    def pop(self) -> I | None:
+        """The next item in round-robin order over senders, or None when empty."""
+        with self._lock:
+            if not self._turn:
+                return None
+            sender = self._turn.popleft()
+            q = self._queues[sender]
+            item, nbytes = q.popleft()
+            self.size -= 1
+            if q:
+                self._bytes[sender] -= nbytes
+                self._turn.append(sender)
+            else:
+                del self._queues[sender], self._bytes[sender]
+            return item
+
+    def clear(self) -> None:
+        with self._lock:
+            self._queues.clear()
+            self._bytes.clear()
+            self._turn.clear()
+            self.size = 0
+
+    def __len__(self) -> int:
+        return self.size
+
+
+@dataclass(frozen=True)
+class BudgetLimits:
+    """Verifications one signer may cost this process: ``per_round`` for every round the
+    owner announces, ``per_s`` for every second (receivers that know no round), at most
+    ``burst`` saved up (a full bucket at start)."""
+
+    per_round: float = 16.0
+    per_s: float = 64.0
+    burst: float = 1024.0
+
+
+class VerifyBudget:
+    """Token buckets of signature verifications, one per signer (loop side only)."""
+
+    def __init__(
+        self, limits: BudgetLimits | None = None, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self.limits = limits or BudgetLimits()
+        self._clock = clock
+        self._tokens: dict[str, float] = {}
+        self._stamp: dict[str, float] = {}
+        self._rounds = 0  # rounds announced so far
+        self._seen_rounds: dict[str, int] = {}
+        self.spent = 0
+        self.refused = 0
+
+    def note_round(self) -> None:
+        """A round started: every signer's bucket gains ``per_round`` (lazily)."""
+        self._rounds += 1
+
+    def take(self, signer: str) -> bool:
+        """Spend one verification of ``signer``'s; False (counted) when over budget."""
+        lim, now = self.limits, self._clock()
+        tokens = self._tokens.get(signer)
+        if tokens is None:
+            tokens = lim.burst
+        else:
+            tokens += (now - self._stamp[signer]) * lim.per_s
+            tokens += (self._rounds - self._seen_rounds[signer]) * lim.per_round
+            tokens = min(tokens, lim.burst)
+        self._stamp[signer] = now
+        self._seen_rounds[signer] = self._rounds
+        if tokens < 1.0:
+            self._tokens[signer] = tokens
+            self.refused += 1
+            return False
+        self._tokens[signer] = tokens - 1.0
+        self.spent += 1
+        return True
+
+
+__all__ = ["FIFO_BYTES", "FIFO_MIN", "MAX_SENDERS", "BudgetLimits", "SenderQueues", "VerifyBudget"]
