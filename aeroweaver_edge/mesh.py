@@ -51,7 +51,7 @@ from .config import ConfigError, MeshConfig
 from .intake import FIFO_MIN, BudgetLimits, SenderQueues, VerifyBudget
 from .security.pki import PkiError
 from .security.transport import LoadedSecurity, load_security, zenoh_security_settings
-from .wire import MAX_PAYLOAD_BYTES, Codec, traffic_lane
+from .wire import MAX_PAYLOAD_BYTES, Codec, traffic_lane, writer_of
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +59,10 @@ T = TypeVar("T", bound=msgspec.Struct)
 I = TypeVar("I")  # noqa: E741 - item type of a Stream
 
 Lane = str  # "control" (served first, completely) or "bulk" (served in batches)
+CONTROL_SENDERS = 4096
+"""Writers the control FIFO tracks at once (a token flood of distinct names included)."""
+CONTROL_PER_SENDER = 1024
+"""Control items one writer may have waiting."""
 BULK_BATCH = 64
 """Bulk samples handled per turn of the loop before other ready work runs."""
 MAX_REPLIES = 1024
@@ -268,7 +272,8 @@ class Stream(Declared, Generic[I]):
             raise ValueError(f"maxsize must be >= 1, got {maxsize}")
         self.maxsize = maxsize
         self.lane = lane or traffic_lane(key)
-        self._raw = SenderQueues(max(maxsize, FIFO_MIN))
+        # bulk: a FIFO per sender of its own; control items share the mesh's (arrival order)
+        self._raw = SenderQueues(max(maxsize, FIFO_MIN)) if self.lane == "bulk" else None
         self.received = 0
         self.dropped = 0
         self._on_item = on_item
@@ -429,6 +434,12 @@ class Mesh:
         self._closing: asyncio.Task[None] | None = None
         self.budget = VerifyBudget(budget)
         self._intakes: dict[Lane, list[Declared]] = {"control": [], "bulk": []}
+        # One FIFO per writer for every control subscription together, so one writer's
+        # items keep their wire order across subscriptions (a Commander's token is seen
+        # before its assignment) while a flooding writer waits behind its own backlog.
+        self._control: SenderQueues[tuple[Declared, Any]] = SenderQueues(
+            CONTROL_PER_SENDER, CONTROL_SENDERS
+        )
         self._scheduled = False  # a _pump is on its way to the loop
         self._turn = 0  # which bulk intake goes first in the next batch
 
@@ -538,25 +549,29 @@ class Mesh:
 
     # -- intake: zenoh threads -> loop ------------------------------------------------------
 
-    def _sender_of(self, key: str, attachment: bytes | None) -> tuple[Any, str | None]:
+    def _sender_of(self, key: str, attachment: bytes | None) -> tuple[str, str | None]:
         """Thread side: whose FIFO a sample goes to, or why it is dropped at once. Secured:
-        the key id of a well-formed attachment of a known identity; else the key."""
+        the identity whose key id a well-formed attachment names; else the key's writer
+        by the key layout (``wire.writer_of``)."""
         if self._auth is None:
-            return key, None
+            return writer_of(key), None
         if not attachment:
-            return None, "unsigned"
-        kid = bytes(attachment[1:9])
-        if not self._auth.verifier.knows_key_id(kid):
-            return None, "wrong_key"
-        return kid, None
+            return "", "unsigned"
+        signer = self._auth.verifier.name_of_key_id(bytes(attachment[1:9]))
+        if signer is None:
+            return "", "wrong_key"
+        return signer, None
 
     def _enqueue(self, handle: Declared, sender: Any, item: Any, nbytes: int = 0) -> None:
         """Thread side: queue ``item`` in ``handle``'s FIFO for ``sender``; drop and count
         when full (never block, never raise); wake the loop once per batch."""
-        raw = handle._raw
-        if raw is None or handle._closed:
+        if handle._closed:
             return
-        why = raw.push(sender, item, nbytes)
+        raw = handle._raw
+        if raw is None:
+            why = self._control.push(sender, (handle, item), nbytes)
+        else:
+            why = raw.push(sender, item, nbytes)
         if why is not None:
             self._dropped(handle, why)
             if isinstance(handle, Queryable):
@@ -576,10 +591,9 @@ class Mesh:
         bulk intakes and, inside each, over senders); reschedules itself while work is left
         so other loop work runs between batches."""
         self._scheduled = False
-        for handle in self._intakes["control"]:
-            raw = handle._raw
-            while raw is not None and (item := raw.pop()) is not None:
-                self._take(handle, item)
+        while (entry := self._control.pop()) is not None:
+            if not entry[0]._closed:
+                self._take(*entry)
         bulk = [h for h in self._intakes["bulk"] if h._raw]
         budget = BULK_BATCH
         if bulk:
@@ -594,7 +608,7 @@ class Mesh:
                         continue
                     self._take(handle, item)
                     budget -= 1
-        left = any(h._raw for lane in self._intakes.values() for h in lane)
+        left = len(self._control) > 0 or any(h._raw for h in self._intakes["bulk"])
         if left and not self._scheduled and self._closing is None:
             self._scheduled = True
             self._loop.call_soon(self._pump)
@@ -692,7 +706,7 @@ class Mesh:
 
         def on_sample(sample: zenoh.Sample) -> None:
             key = str(sample.key_expr)
-            self._enqueue(watch, key, (key, sample.kind == zenoh.SampleKind.PUT))
+            self._enqueue(watch, writer_of(key), (key, sample.kind == zenoh.SampleKind.PUT))
 
         self._add_intake(watch)
         handler = zenoh.handlers.Callback(on_sample, indirect=False)

@@ -89,9 +89,9 @@ class Verifier:
         """``Authorizer.may_write``, remembered (see ``_may_write``)."""
         return self._may_write(signer, key)
 
-    def knows_key_id(self, kid: bytes) -> bool:
-        """Whether an identity of the list signs with key id ``kid`` (thread-safe: read only)."""
-        return kid in self._by_key_id
+    def name_of_key_id(self, kid: bytes) -> str | None:
+        """The identity that signs with key id ``kid``, if any (thread-safe: read only)."""
+        return self._by_key_id.get(kid)
 
     def _may_write(self, signer: str, key: str) -> bool:
         """``authorizer.may_write`` remembered per (signer, key): a flood repeats its keys,
