@@ -327,6 +327,10 @@ def cmd_memory(args: argparse.Namespace) -> int:
         )
         for task, roles in data["by_task"].items():
             print(f"  {task}: " + ", ".join(f"{role} {n}" for role, n in roles.items()))
+        for f in data["files"]:  # per daemon: whose records it holds (peers' are capped)
+            print(f"  {Path(f['path']).name}: " + ", ".join(
+                f"{who} {c['records']} ({c['bytes']} B{', shared' if c['shared'] else ''})"
+                for who, c in f["by_sender"].items()))  # fmt: skip
         return 0
     if args.memory_command == "export":
         if args.output:
