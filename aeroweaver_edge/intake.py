@@ -126,12 +126,20 @@ class VerifyBudget:
         self._stamp: dict[str, float] = {}
         self._rounds = 0  # rounds announced so far
         self._seen_rounds: dict[str, int] = {}
+        self._empty_until: dict[str, float] = {}  # signer -> when its next token is due
         self.spent = 0
         self.refused = 0
 
     def note_round(self) -> None:
         """A round started: every signer's bucket gains ``per_round`` (lazily)."""
         self._rounds += 1
+        self._empty_until = {}
+
+    def exhausted(self, signer: str) -> bool:
+        """Whether ``signer``'s bucket is certainly still empty (thread-safe read): Zenoh's
+        callback drops such a sample at once, before queueing or decoding it."""
+        until = self._empty_until.get(signer)
+        return until is not None and self._clock() < until
 
     def take(self, signer: str) -> bool:
         """Spend one verification of ``signer``'s; False (counted) when over budget."""
@@ -148,6 +156,8 @@ class VerifyBudget:
         if tokens < 1.0:
             self._tokens[signer] = tokens
             self.refused += 1
+            if lim.per_s > 0:
+                self._empty_until[signer] = now + (1.0 - tokens) / lim.per_s
             return False
         self._tokens[signer] = tokens - 1.0
         self.spent += 1

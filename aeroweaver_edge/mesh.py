@@ -560,6 +560,8 @@ class Mesh:
         signer = self._auth.verifier.name_of_key_id(bytes(attachment[1:9]))
         if signer is None:
             return "", "wrong_key"
+        if self.budget.exhausted(signer):
+            return "", "over_budget"
         return signer, None
 
     def _enqueue(self, handle: Declared, sender: Any, item: Any, nbytes: int = 0) -> None:

@@ -258,6 +258,8 @@ class PeerLink:
             return "own"
         if sender not in self._roster:
             return "unknown_sender"
+        if self.inbox.too_old(msg.round):
+            return "no_own_position"  # what collect would say: nothing to judge its reach by
         return self.inbox.admit(msg) or self._replay.would_refuse(
             msg.h, stream="broadcast" if broadcast else "inbox"
         )
