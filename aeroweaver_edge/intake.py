@@ -110,8 +110,8 @@ class BudgetLimits:
     ``burst`` saved up (a full bucket at start)."""
 
     per_round: float = 16.0
-    per_s: float = 64.0
-    burst: float = 1024.0
+    per_s: float = 32.0
+    burst: float = 512.0
 
 
 class VerifyBudget:
