@@ -656,7 +656,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--in-process", action="store_true", help="scale: daemons in one process (no RSS)"
     )
     b.add_argument("--seconds", type=finite(), default=5.0, help="mavlink: streaming time")
-    b.add_argument("--uavs", type=int, default=3, help="llm_latency: UAVs sharing the server; flood: UAVs flying")
+    b.add_argument("--uavs", type=int, default=3, help="llm_latency, flood: UAVs")
     b.add_argument("--cases", type=int_in(1), default=100_000, help="fuzz: payloads")
     b.add_argument("--insecure", action="store_true", help="fuzz: no signature layer")
     b.set_defaults(func=cmd_bench)
