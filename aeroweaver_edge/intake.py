@@ -24,7 +24,9 @@ import time
 from collections import deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
+
+from aeroweaver_edge.wire import MAX_PAYLOAD_BYTES
 
 I = TypeVar("I")  # noqa: E741 - queued item type
 
@@ -164,4 +166,34 @@ class VerifyBudget:
         return True
 
 
-__all__ = ["FIFO_BYTES", "FIFO_MIN", "MAX_SENDERS", "BudgetLimits", "SenderQueues", "VerifyBudget"]
+SIZE_LIMIT_BYTES = MAX_PAYLOAD_BYTES + 1024
+"""What zenoh's ``low_pass_filter`` lets through: our payload cap plus the signature
+attachment and headroom. Nothing we publish is larger."""
+
+
+def low_pass_filter(size_limit: int = SIZE_LIMIT_BYTES) -> list[dict[str, Any]]:
+    """Zenoh's size interceptor as a config entry (path ``low_pass_filter``): a router that
+    loads it drops oversize messages for all its clients before they reach any process.
+    Meant for ``mesh.zenoh_settings`` (and so for the configs ``keys init`` renders);
+    ``mesh.py`` drops oversize samples in its callbacks either way."""
+    return [
+        {
+            "id": "aeroweaver-size",
+            "flows": ["ingress", "egress"],
+            "messages": ["put", "delete", "query", "reply"],
+            "key_exprs": ["**"],
+            "size_limit": size_limit,
+        }
+    ]
+
+
+__all__ = [
+    "FIFO_BYTES",
+    "FIFO_MIN",
+    "MAX_SENDERS",
+    "SIZE_LIMIT_BYTES",
+    "BudgetLimits",
+    "SenderQueues",
+    "VerifyBudget",
+    "low_pass_filter",
+]

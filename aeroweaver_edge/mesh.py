@@ -69,9 +69,6 @@ MAX_REPLIES = 1024
 """Replies one ``get`` keeps (more are dropped and counted: a reply flood cannot grow it)."""
 MAX_QUERIES = 64
 """Queries waiting for an answer per queryable (more are ended unanswered, counted)."""
-SIZE_LIMIT_BYTES = MAX_PAYLOAD_BYTES + 1024
-"""Zenoh's own ``low_pass_filter``: larger messages are dropped by the session (a router
-drops them for every client) before they reach Python; payload cap plus attachment."""
 
 LivelinessEvent = tuple[str, bool]
 """``(key, alive)``: True when a token appeared (PUT), False when it went away (DELETE)."""
@@ -127,28 +124,12 @@ def zenoh_settings(cfg: MeshConfig, security: LoadedSecurity | None) -> list[tup
         ("transport/link/tx/lease", cfg.lease_ms),
         # zenoh #2628: SHM watchdog race loses query replies under load; our payloads are small.
         ("transport/shared_memory/enabled", False),
-        ("low_pass_filter", low_pass_filter()),
     ]
     if cfg.namespace:
         settings.append(("namespace", cfg.namespace))
     if security is not None:
         settings.extend(zenoh_security_settings(security))
     return settings
-
-
-def low_pass_filter(size_limit: int = SIZE_LIMIT_BYTES) -> list[dict[str, Any]]:
-    """Zenoh's size interceptor, applied by every session (routers included, so a router
-    that renders this config from ``keys init`` drops oversize messages for all its
-    clients): nothing we publish is larger, so anything larger is hostile."""
-    return [
-        {
-            "id": "aeroweaver-size",
-            "flows": ["ingress", "egress"],
-            "messages": ["put", "delete", "query", "reply"],
-            "key_exprs": ["**"],
-            "size_limit": size_limit,
-        }
-    ]
 
 
 def build_zenoh_config(cfg: MeshConfig, security: LoadedSecurity | None = None) -> zenoh.Config:

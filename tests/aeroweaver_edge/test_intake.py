@@ -127,3 +127,17 @@ async def test_a_full_intake_never_blocks_the_session(zenoh_net: ZenohNet) -> No
     time.sleep(0.5)  # noqa: ASYNC251 - blocking the loop on purpose
     assert await eventually(lambda: cmd.received == 1, 5.0)
     assert sub.intake_dropped > 0 or sub.dropped > 0
+
+
+def test_the_size_filter_is_a_config_zenoh_accepts() -> None:
+    """``intake.low_pass_filter`` is meant for the rendered configs: zenoh 1.10 takes it."""
+    import json
+
+    import zenoh
+
+    from aeroweaver_edge.intake import SIZE_LIMIT_BYTES, low_pass_filter
+
+    conf = zenoh.Config()
+    conf.insert_json5("low_pass_filter", json.dumps(low_pass_filter()))
+    [entry] = json.loads(conf.get_json("low_pass_filter"))
+    assert entry["size_limit"] == SIZE_LIMIT_BYTES
