@@ -50,6 +50,8 @@ import zenoh
 from .config import ConfigError, MeshConfig
 from .intake import FIFO_MIN, BudgetLimits, SenderQueues, VerifyBudget
 from .security.pki import PkiError
+from .security.signing import ATTACHMENT_BYTES
+from .security.signing import VERSION as SIGNING_VERSION
 from .security.transport import LoadedSecurity, load_security, zenoh_security_settings
 from .wire import MAX_PAYLOAD_BYTES, Codec, traffic_lane, writer_of
 
@@ -63,6 +65,8 @@ CONTROL_SENDERS = 4096
 """Writers the control FIFO tracks at once (a token flood of distinct names included)."""
 CONTROL_PER_SENDER = 1024
 """Control items one writer may have waiting."""
+CONTROL_BATCH = 1024
+"""Control items handled per turn of the loop (all of them but under a flood of its own)."""
 BULK_BATCH = 64
 """Bulk samples handled per turn of the loop before other ready work runs."""
 MAX_REPLIES = 1024
@@ -538,6 +542,8 @@ class Mesh:
             return writer_of(key), None
         if not attachment:
             return "", "unsigned"
+        if len(attachment) != ATTACHMENT_BYTES or attachment[0] != SIGNING_VERSION:
+            return "", "bad_attachment"
         signer = self._auth.verifier.name_of_key_id(bytes(attachment[1:9]))
         if signer is None:
             return "", "wrong_key"
@@ -574,7 +580,10 @@ class Mesh:
         bulk intakes and, inside each, over senders); reschedules itself while work is left
         so other loop work runs between batches."""
         self._scheduled = False
-        while (entry := self._control.pop()) is not None:
+        for _ in range(CONTROL_BATCH):
+            entry = self._control.pop()
+            if entry is None:
+                break
             if not entry[0]._closed:
                 self._take(*entry)
         bulk = [h for h in self._intakes["bulk"] if h._raw]
