@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from aeroweaver_edge.agent import memory_tools
 from aeroweaver_edge.agent.memory import ExperienceMemory
 from aeroweaver_edge.agent.shared_intake import SharedIntake
@@ -124,7 +126,9 @@ def test_balanced_peers_are_not_capped(tmp_path: Path) -> None:
     plain.close()
 
 
-def test_memory_stats_counts_records_and_bytes_per_sender(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+def test_memory_stats_counts_records_and_bytes_per_sender(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     path = tmp_path / "uav0.sqlite3"
     m = ExperienceMemory(path)
     own(m, 0, "landmark l1", "hold_position", 0.0)

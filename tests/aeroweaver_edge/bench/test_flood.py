@@ -5,6 +5,8 @@ what the benchmark reports, on a machine quiet enough to mean something."""
 
 from __future__ import annotations
 
+import pytest
+
 from aeroweaver_edge.agent.memory import MAX_RECORDS_PER_SENDER
 from aeroweaver_edge.bench.flood import ATTACKS, bench
 
@@ -37,7 +39,7 @@ async def test_every_flood_leaves_the_mission_whole() -> None:
     )
 
 
-def test_the_cli_runs_the_flood_benchmark_with_its_options(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_the_cli_runs_the_flood_benchmark_with_its_options(monkeypatch: pytest.MonkeyPatch) -> None:
     """``aeroweaver bench flood --rounds 48`` (docs/security.md) is this module's main."""
     from aeroweaver_edge import cli
     from aeroweaver_edge.bench import flood
