@@ -667,18 +667,21 @@ class Mesh:
         sub: Subscription[T] = Subscription(self, key_expr, kind, maxsize, on_item, lane, precheck)
 
         def on_sample(sample: zenoh.Sample) -> None:
-            key = str(sample.key_expr)
-            if len(sample.payload) > MAX_PAYLOAD_BYTES:
-                self._dropped(sub, "oversize")
-                return
-            att = sample.attachment
-            attachment = att.to_bytes() if att is not None else None
-            sender, why = self._sender_of(key, attachment)
-            if why is not None:
-                self._dropped(sub, why)
-                return
-            data = sample.payload.to_bytes()
-            self._enqueue(sub, sender, (key, data, attachment), len(data))
+            try:
+                key = str(sample.key_expr)
+                if len(sample.payload) > MAX_PAYLOAD_BYTES:
+                    self._dropped(sub, "oversize")
+                    return
+                att = sample.attachment
+                attachment = att.to_bytes() if att is not None else None
+                sender, why = self._sender_of(key, attachment)
+                if why is not None:
+                    self._dropped(sub, why)
+                    return
+                data = sample.payload.to_bytes()
+                self._enqueue(sub, sender, (key, data, attachment), len(data))
+            except Exception:  # never into zenoh's thread: counted, the sample dropped
+                self._dropped(sub, "intake_error")
 
         self._add_intake(sub)
         handler = zenoh.handlers.Callback(on_sample, indirect=False)
