@@ -40,6 +40,12 @@ FIFO_MIN = 256
 experience records, arrives before the loop runs)."""
 FIFO_BYTES = 4 * 1024 * 1024
 """Payload bytes one sender may have waiting in one FIFO."""
+SAMPLE_RATE = 1000.0
+SAMPLE_BURST = 2048.0
+"""Samples one sender may hand one bulk subscription per second (and at once): beyond, the
+callback drops them before copying or decoding (``over_rate``). Honest peers send a few per
+round (a few hundred per second at the fastest lockstep rounds) and an episode's experience
+at once; a flood is cut to this rate at every receiver."""
 
 
 class SenderQueues(Generic[I]):
@@ -48,18 +54,46 @@ class SenderQueues(Generic[I]):
     Each sender may have ``per_sender`` items and ``max_bytes`` bytes waiting."""
 
     def __init__(
-        self, per_sender: int, max_senders: int = MAX_SENDERS, max_bytes: int = FIFO_BYTES
+        self,
+        per_sender: int,
+        max_senders: int = MAX_SENDERS,
+        max_bytes: int = FIFO_BYTES,
+        *,
+        rate: float | None = None,
+        burst: float = SAMPLE_BURST,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if per_sender < 1:
             raise ValueError(f"per_sender must be >= 1, got {per_sender}")
         self.per_sender = per_sender
         self.max_senders = max_senders
         self.max_bytes = max_bytes
+        self.rate = rate
+        self.burst = burst
+        self._clock = clock
+        self._gate: dict[Hashable, tuple[float, float]] = {}  # sender -> (tokens, stamp)
         self._bytes: dict[Hashable, int] = {}
         self._queues: dict[Hashable, deque[tuple[I, int]]] = {}
         self._turn: deque[Hashable] = deque()  # senders with something queued, in turn
         self._lock = threading.Lock()
         self.size = 0
+
+    def admit(self, sender: Hashable) -> bool:
+        """Whether ``sender`` is within its sample rate (always, without one); spends one.
+        Called by the callback before it copies the payload."""
+        if self.rate is None:
+            return True
+        now = self._clock()
+        with self._lock:
+            tokens, stamp = self._gate.get(sender, (self.burst, now))
+            tokens = min(self.burst, tokens + (now - stamp) * self.rate)
+            if len(self._gate) >= self.max_senders and sender not in self._gate:
+                self._gate.clear()  # bounded: forgetting only gives a fresh burst
+            if tokens < 1.0:
+                self._gate[sender] = (tokens, now)
+                return False
+            self._gate[sender] = (tokens - 1.0, now)
+            return True
 
     def push(self, sender: Hashable, item: I, nbytes: int = 0) -> str | None:
         """Queue ``item`` (``nbytes`` long); None if queued, else why it was dropped."""
@@ -194,6 +228,8 @@ __all__ = [
     "FIFO_BYTES",
     "FIFO_MIN",
     "MAX_SENDERS",
+    "SAMPLE_BURST",
+    "SAMPLE_RATE",
     "SIZE_LIMIT_BYTES",
     "BudgetLimits",
     "SenderQueues",

@@ -48,7 +48,7 @@ import msgspec
 import zenoh
 
 from .config import ConfigError, MeshConfig
-from .intake import FIFO_MIN, BudgetLimits, SenderQueues, VerifyBudget
+from .intake import FIFO_MIN, SAMPLE_RATE, BudgetLimits, SenderQueues, VerifyBudget
 from .security.pki import PkiError
 from .security.signing import ATTACHMENT_BYTES
 from .security.signing import VERSION as SIGNING_VERSION
@@ -258,7 +258,9 @@ class Stream(Declared, Generic[I]):
         self.maxsize = maxsize
         self.lane = lane or traffic_lane(key)
         # bulk: a FIFO per sender of its own; control items share the mesh's (arrival order)
-        self._raw = SenderQueues(max(maxsize, FIFO_MIN)) if self.lane == "bulk" else None
+        self._raw = (
+            SenderQueues(max(maxsize, FIFO_MIN), rate=SAMPLE_RATE) if self.lane == "bulk" else None
+        )
         self.received = 0
         self.dropped = 0
         self._on_item = on_item
@@ -675,6 +677,8 @@ class Mesh:
                 att = sample.attachment
                 attachment = att.to_bytes() if att is not None else None
                 sender, why = self._sender_of(key, attachment)
+                if why is None and sub._raw is not None and not sub._raw.admit(sender):
+                    why = "over_rate"
                 if why is not None:
                     self._dropped(sub, why)
                     return

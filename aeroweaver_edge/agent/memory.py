@@ -51,7 +51,8 @@ Peers' share (issue 22: one compromised peer stored 8-12k records in every peer 
     >99 % of a role's memory its own)
     A peer's records are stored at most ``max_records_per_sender`` rows and
     ``max_bytes_per_sender`` bytes (state text, invocation and tokens) per sender; beyond
-    that, that sender's *oldest* stored records are evicted first (nobody else's). In a
+    that, that sender's *oldest* stored records are evicted first (nobody else's), down to
+    7/8 of the caps at once (so a flood at the cap costs one recount per cap/8 records). In a
     neighbourhood, a peer holding more records of the (task, role) group than this daemon
     itself (honest same-role peers hold about as many) gets at most
     ``max_sender_share`` of the K places; the places it loses go to the next-best records
@@ -929,6 +930,8 @@ class ExperienceMemory:
         ).fetchone()
         gone: list[int] = []
         if n + 1 > cap_n or b + size > cap_b:
+            # Down to 7/8 of the caps at once: the next cap/8 records need no recount.
+            cap_n, cap_b = cap_n - max(1, cap_n // 8), cap_b - cap_b // 8
             cur = self._db.execute(
                 "SELECT seq, task, role, run, uav, episode, round, length(state_text) + "
                 "length(invocation) + length(tokens) FROM records WHERE origin = ? ORDER BY seq",

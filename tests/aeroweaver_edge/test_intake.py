@@ -30,6 +30,16 @@ def test_sender_queues_are_bounded_per_sender_and_served_round_robin() -> None:
     assert len(q) == 0
 
 
+def test_a_sender_beyond_its_sample_rate_is_refused_before_any_copy() -> None:
+    now = [0.0]
+    q: SenderQueues[str] = SenderQueues(8, rate=10.0, burst=3.0, clock=lambda: now[0])
+    assert [q.admit("flood") for _ in range(5)] == [True, True, True, False, False]
+    assert q.admit("honest")  # its own bucket
+    now[0] += 0.2  # two samples' worth
+    assert [q.admit("flood") for _ in range(3)] == [True, True, False]
+    assert SenderQueues[str](8).admit("anyone")  # no rate: always
+
+
 def test_budget_refills_per_round_and_per_second_up_to_the_burst() -> None:
     now = [0.0]
     b = VerifyBudget(BudgetLimits(per_round=2, per_s=1, burst=3), clock=lambda: now[0])
@@ -65,7 +75,7 @@ def _msg(sender: str, seq: int) -> InboxMessage:
                         kind="status", body={"i": seq})  # fmt: skip
 
 
-async def heard(mesh: Mesh, done: Callable[[], bool], timeout_s: float = 5.0) -> bool:
+async def heard(mesh: Mesh, done: Callable[[], bool], timeout_s: float = 15.0) -> bool:
     """Probe ``mesh``'s broadcast key until ``done()``: the receiver's subscription is known."""
     deadline = time.monotonic() + timeout_s
     while not done():
@@ -103,19 +113,20 @@ async def test_a_flooding_sender_starves_no_other_sender(zenoh_net: ZenohNet) ->
         time.sleep(0.01)  # noqa: ASYNC251 - blocking the loop on purpose
     assert "honest" in raw._queues
     assert len(raw._queues["flood"]) > 100  # the flood's backlog is queued before it
-    assert await eventually(lambda: any(s == "honest" for s, _ in got), 10.0)
+    assert await eventually(lambda: sum(s == "flood" for s, _ in got) > 100, 15.0)
     order = [s for s, _ in got]
     # Round robin over senders: the honest message is the second one taken, not behind
     # the 1,024 the flood has queued.
     assert order.index("honest") <= 1, order.index("honest")
-    assert order.count("flood") > 100
     event = await asyncio.wait_for(watch.get(), 10.0)
     assert event == (K.alive_uav("honest"), True)
     assert time.monotonic() - sent_at < 10.0
     # Bounded: what the FIFO could not hold was dropped and counted, nothing raised.
     # (zenoh's DROP congestion control may also drop some at the sender: not counted here)
     assert await eventually(lambda: sub.intake_dropped > 0, 10.0)
-    assert rx.codec.stats.rejected.get("intake_full", 0) == sub.intake_dropped
+    refused = rx.codec.stats.rejected
+    assert refused.get("intake_full", 0) + refused.get("over_rate", 0) == sub.intake_dropped
+    assert refused["over_rate"] > 0  # beyond its sample rate, dropped before any copy
     await token.aclose()
 
 

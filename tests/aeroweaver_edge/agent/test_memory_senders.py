@@ -49,14 +49,18 @@ def test_a_sender_is_capped_and_loses_its_oldest_first(tmp_path: Path) -> None:
         assert m.ingest(rec("honest", i))
     for i in range(300):
         assert m.ingest(rec("evil", i, run=f"evil-{i // 100}"))
-    assert senders(m) == {"me": 1, "honest": 10, "evil": 50}
+    held = senders(m)
+    assert held["me"] == 1
+    assert held["honest"] == 10
+    assert 50 - 50 // 8 <= held["evil"] <= 50  # evicted down to 7/8 of the cap at a time
     kept = sorted(r.round for r in m.records(T, R) if r.origin == "evil")
-    assert kept == list(range(250, 300))  # the newest 50: oldest of that sender evicted
-    assert m.evicted == 250
+    assert kept == list(range(300 - held["evil"], 300))  # the newest: oldest evicted first
+    assert m.evicted == 300 - held["evil"]
     m.close()
     again = ExperienceMemory(tmp_path / "m.sqlite3", max_records_per_sender=50)  # reopened
-    assert again.ingest(rec("evil", 300))
-    assert senders(again)["evil"] == 50
+    for i in range(300, 400):
+        assert again.ingest(rec("evil", i))
+    assert senders(again)["evil"] <= 50
     again.close()
 
 
@@ -80,8 +84,8 @@ def test_evicted_records_leave_the_neighbourhood(tmp_path: Path) -> None:
         m.ingest(rec("evil", i, ret=100.0))
     near = m.neighbourhood_of(T, R, "landmark l1 near")
     evil = [n for n in near if n.key[0] == "evil"]
-    assert len(evil) <= 5
-    assert {n.key[2] for n in evil} <= set(range(35, 40))
+    assert 1 <= len(evil) <= 5
+    assert {n.key[2] for n in evil} <= set(range(35, 40))  # only the newest are left
     m.close()
 
 

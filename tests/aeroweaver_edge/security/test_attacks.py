@@ -316,7 +316,8 @@ def test_ten_thousand_future_round_messages_are_bounded(coverage: Campaign) -> N
     round window, or already at the receiver's per-sender intake FIFO when the burst
     outran its loop (issue 22: callbacks only enqueue, bounded per sender)."""
     side = coverage.side("daemons")
-    assert side["future_round"] + side.get("intake_full", 0) == FLOOD
+    cut = side.get("intake_full", 0) + side.get("over_rate", 0)  # at the callback
+    assert side["future_round"] + cut == FLOOD
     assert side["future_round"] > 0
     same_outcome(coverage)
 
@@ -393,10 +394,12 @@ def test_an_outsider_with_another_ca_gets_no_link(coverage: Campaign) -> None:
 
 def test_every_refusal_is_accounted_for(coverage: Campaign) -> None:
     """Nothing else was refused: the counts are exactly the attacks the receivers saw."""
-    flooded = coverage.rejected.get("intake_full", 0)  # the burst outran the loop: see above
+    full = coverage.rejected.get("intake_full", 0)  # the burst outran the loop: see above
+    rate = coverage.rejected.get("over_rate", 0)  # beyond the sender's sample rate
     expected = Counter(
-        {"wrong_key": 1, "unsigned": 1, "unauthorised_signer": 1, "future_round": FLOOD - flooded,
-         "intake_full": flooded, "non_finite": coverage.nan_commands}
+        {"wrong_key": 1, "unsigned": 1, "unauthorised_signer": 1,
+         "future_round": FLOOD - full - rate, "intake_full": full, "over_rate": rate,
+         "non_finite": coverage.nan_commands}
     )  # fmt: skip
     assert Counter(coverage.rejected) == +expected
     assert coverage.attacked["security"]["rejected_total"] == sum(expected.values())
@@ -406,7 +409,7 @@ def test_the_live_view_and_the_summary_say_what_was_refused(coverage: Campaign) 
     lines = coverage.view.splitlines()
     refused = [ln for ln in lines if ln.startswith("  refused: ")]
     assert any("world non_finite x1" in ln for ln in refused)
-    future = coverage.rejected["future_round"]  # the rest of the flood: intake_full
+    future = coverage.rejected["future_round"]  # the rest of the flood: cut at the callback
     # The loop takes a flood in batches, so its refusals may span two rounds' lines.
     per_round = [re.search(r"uav1 .*future_round x(\d+)", ln) for ln in refused]
     assert sum(int(m.group(1)) for m in per_round if m) == future
