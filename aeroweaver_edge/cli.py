@@ -401,6 +401,10 @@ def cmd_memory(args: argparse.Namespace) -> int:
         )
         for task, roles in data["by_task"].items():
             print(f"  {task}: " + ", ".join(f"{role} {n}" for role, n in roles.items()))
+        for f in data["files"]:  # per daemon: whose records it holds (peers' are capped)
+            print(f"  {Path(f['path']).name}: " + ", ".join(
+                f"{who} {c['records']} ({c['bytes']} B{', shared' if c['shared'] else ''})"
+                for who, c in f["by_sender"].items()))  # fmt: skip
         return 0
     if args.memory_command == "export":
         if args.output:
@@ -460,6 +464,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         argv = ["--runs", *map(str, args.sizes or [3, 10]), "--rounds", str(args.rounds)]
         return security.main([*argv, "--seed", str(args.seed), "--task", args.task])
+    if args.what == "flood":  # a compromised enrolled UAV floods a secured swarm (issue 22)
+        from aeroweaver_edge.bench import flood
+
+        argv = ["--uavs", str(args.uavs), "--rounds", str(args.rounds), "--seed", str(args.seed)]
+        return flood.main([*argv, "--task", args.task])
     if args.what == "fuzz":  # hostile payloads over every key
         from aeroweaver_edge.bench import fuzz_wire
 
@@ -751,7 +760,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--in-process", action="store_true", help="scale: daemons in one process (no RSS)"
     )
     b.add_argument("--seconds", type=finite(), default=5.0, help="mavlink: streaming time")
-    b.add_argument("--uavs", type=int, default=3, help="llm_latency: UAVs sharing the server")
+    b.add_argument("--uavs", type=int, default=3, help="llm_latency, flood: UAVs")
     b.add_argument("--cases", type=int_in(1), default=100_000, help="fuzz: payloads")
     b.add_argument("--insecure", action="store_true", help="fuzz: no signature layer")
     b.set_defaults(func=cmd_bench)
@@ -802,6 +811,7 @@ BENCH_WHATS = [
     "mavlink",
     "llm_latency",
     "security",
+    "flood",
     "fuzz",
 ]
 

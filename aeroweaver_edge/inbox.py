@@ -131,6 +131,10 @@ class Inbox:
         ahead, own = self.limits.future_rounds, self.round
         return ahead is not None and own is not None and round_ > own + ahead
 
+    def too_old(self, round_: int) -> bool:
+        """A round older than every own position kept: its reach can never be judged."""
+        return bool(self._positions) and round_ < min(self._positions)
+
     def _ahead_reason(self, round_: int) -> str:
         """Why a message too far ahead is dropped: sent in the last two rounds of the episode
         that just ended (it has no next round to enter), or forged or stale. The window is

@@ -17,6 +17,19 @@ from the swarm's identity list, every payload we publish (puts and query replies
 an Ed25519 signature in its attachment, and every payload we receive must carry a valid
 one by an author allowed to write its key; anything else is counted and dropped here,
 before any handler sees it (see ``security/``).
+
+Receiving under a flood (``intake.py``): a callback only checks the size (and, secured, that
+an attachment names a known key id), then puts the sample in its subscription's per-sender
+FIFO (bounded, round robin, full = dropped and counted, never blocking) and wakes the loop
+at most once per batch. The loop serves *control* subscriptions (liveliness, the world's
+perceptions and commands, the Commander's keys) completely first, then at most
+``BULK_BATCH`` *bulk* samples (peer messages, beacons, experience, reports) before giving
+the loop back, so a flood of broadcasts can delay neither a liveliness change nor a round.
+Before any decoding or crypto a signed payload must carry a known key id allowed to write
+its key; after decoding, its claimed sender must own that key and the subscription's own
+cheap checks (``precheck``: roster, round window, epoch) must pass; only then is one
+verification spent from the signer's budget (``VerifyBudget``); over budget is dropped and
+counted as ``over_budget``.
 """
 
 from __future__ import annotations
@@ -35,14 +48,31 @@ import msgspec
 import zenoh
 
 from .config import ConfigError, MeshConfig
+from .intake import FIFO_MIN, SAMPLE_RATE, BudgetLimits, SenderQueues, VerifyBudget
 from .security.pki import PkiError
+from .security.signing import ATTACHMENT_BYTES
+from .security.signing import VERSION as SIGNING_VERSION
 from .security.transport import LoadedSecurity, load_security, zenoh_security_settings
-from .wire import Codec
+from .wire import MAX_PAYLOAD_BYTES, Codec, traffic_lane, writer_of
 
 log = logging.getLogger(__name__)
 
 T = TypeVar("T", bound=msgspec.Struct)
 I = TypeVar("I")  # noqa: E741 - item type of a Stream
+
+Lane = str  # "control" (served first, completely) or "bulk" (served in batches)
+CONTROL_SENDERS = 4096
+"""Writers the control FIFO tracks at once (a token flood of distinct names included)."""
+CONTROL_PER_SENDER = 1024
+"""Control items one writer may have waiting."""
+CONTROL_BATCH = 1024
+"""Control items handled per turn of the loop (all of them but under a flood of its own)."""
+BULK_BATCH = 64
+"""Bulk samples handled per turn of the loop before other ready work runs."""
+MAX_REPLIES = 1024
+"""Replies one ``get`` keeps (more are dropped and counted: a reply flood cannot grow it)."""
+MAX_QUERIES = 64
+"""Queries waiting for an answer per queryable (more are ended unanswered, counted)."""
 
 LivelinessEvent = tuple[str, bool]
 """``(key, alive)``: True when a token appeared (PUT), False when it went away (DELETE)."""
@@ -174,11 +204,15 @@ def _init_zenoh_log() -> None:
 class Declared:
     """Something declared on the session; ``aclose`` undeclares it (off the loop)."""
 
+    lane: Lane = "control"
+    _raw: SenderQueues[Any] | None = None  # what callbacks enqueued, for the loop to take
+
     def __init__(self, mesh: Mesh, key: str) -> None:
         self.key = key
         self._mesh = mesh
         self._entity: _Undeclarable | None = None
         self._closed = False
+        self.intake_dropped = 0  # samples dropped by the callback (FIFO full, cheap checks)
 
     @property
     def closed(self) -> bool:
@@ -186,6 +220,11 @@ class Declared:
 
     def _mark_closed(self) -> None:
         self._closed = True
+        if self._raw is not None:
+            self._raw.clear()
+
+    def _take(self, item: Any) -> None:
+        """Loop side: handle one item a callback enqueued."""
 
     async def aclose(self) -> None:
         """Undeclare; idempotent. Mesh.aclose does this for everything still declared."""
@@ -201,16 +240,27 @@ class Stream(Declared, Generic[I]):
     When full it drops the *oldest* item (counted in ``dropped``), like zenoh's RingChannel:
     for latest-wins state and next-round messages the newest data is the useful data.
     With ``on_item`` set, items go straight to that loop-side function instead, in arrival
-    order, and the queue stays empty.
+    order, and the queue stays empty. Before that, callbacks put what they receive in
+    per-sender FIFOs of ``maxsize`` each (``intake.SenderQueues``).
     """
 
     def __init__(
-        self, mesh: Mesh, key: str, maxsize: int, on_item: Callable[[I], object] | None
+        self,
+        mesh: Mesh,
+        key: str,
+        maxsize: int,
+        on_item: Callable[[I], object] | None,
+        lane: Lane | None = None,
     ) -> None:
         super().__init__(mesh, key)
         if maxsize < 1:
             raise ValueError(f"maxsize must be >= 1, got {maxsize}")
         self.maxsize = maxsize
+        self.lane = lane or traffic_lane(key)
+        # bulk: a FIFO per sender of its own; control items share the mesh's (arrival order)
+        self._raw = (
+            SenderQueues(max(maxsize, FIFO_MIN), rate=SAMPLE_RATE) if self.lane == "bulk" else None
+        )
         self.received = 0
         self.dropped = 0
         self._on_item = on_item
@@ -230,6 +280,9 @@ class Stream(Declared, Generic[I]):
             self._queue.get_nowait()
             self.dropped += 1
         self._queue.put_nowait(item)
+
+    def _take(self, item: Any) -> None:
+        self._offer(item)
 
     def _mark_closed(self) -> None:
         if not self._closed:
@@ -266,6 +319,11 @@ class Stream(Declared, Generic[I]):
                 return
 
 
+Precheck = Callable[[str, Any], bool]
+"""A subscription's own cheap checks on a decoded payload, run before its signature is
+verified: False drops it (the check counts why)."""
+
+
 class Subscription(Stream[tuple[str, T]], Generic[T]):
     """Decoded ``(key, msg)`` pairs; undecodable payloads are counted and skipped."""
 
@@ -276,15 +334,21 @@ class Subscription(Stream[tuple[str, T]], Generic[T]):
         kind: type[T],
         maxsize: int,
         on_item: Callable[[tuple[str, T]], object] | None,
+        lane: Lane | None = None,
+        precheck: Precheck | None = None,
     ) -> None:
-        super().__init__(mesh, key, maxsize, on_item)
+        super().__init__(mesh, key, maxsize, on_item, lane)
         self.kind = kind
+        self.precheck = precheck
         self.undecodable = 0
+
+    def _take(self, item: Any) -> None:
+        self._deliver(*item)
 
     def _deliver(self, key: str, data: bytes, attachment: bytes | None) -> None:
         if self._closed:
             return
-        msg = self._mesh._accept(key, data, attachment, self.kind)
+        msg = self._mesh._accept(key, data, attachment, self.kind, self.precheck)
         if msg is None:
             self.undecodable += 1
             return
@@ -292,24 +356,40 @@ class Subscription(Stream[tuple[str, T]], Generic[T]):
 
 
 class LivelinessWatch(Stream[LivelinessEvent]):
-    """``(key, alive)`` events for liveliness tokens, starting with those already alive."""
+    """``(key, alive)`` events for liveliness tokens, starting with those already alive.
+    Always on the control lane: a flood of data never delays who is alive."""
 
 
 class Queryable(Declared):
-    """Answers queries on one concrete key with the provider's latest value."""
+    """Answers queries on one concrete key with the provider's latest value. The signed
+    reply is made once per value (a query flood costs no signatures), and at most
+    ``MAX_QUERIES`` queries wait; more are ended unanswered."""
 
     def __init__(self, mesh: Mesh, key: str, provider: Callable[[], msgspec.Struct | None]) -> None:
         super().__init__(mesh, key)
+        self.lane = "bulk"
+        self._raw = SenderQueues(MAX_QUERIES)
         self._provider = provider
+        self._signed: tuple[msgspec.Struct, bytes, bytes | None] | None = None
         self.answered = 0
+
+    def _take(self, item: Any) -> None:
+        self._answer(item)
 
     def _answer(self, query: zenoh.Query) -> None:
         try:
             if not self._closed:
                 value = self._provider()
                 if value is not None:
-                    data = self._mesh.codec.encode(value)
-                    query.reply(self.key, data, attachment=self._mesh._sign(self.key, value, data))
+                    cached = self._signed
+                    if cached is None or cached[0] is not value:
+                        data = self._mesh.codec.encode(value)
+                        cached = self._signed = (
+                            value,
+                            data,
+                            self._mesh._sign(self.key, value, data),
+                        )
+                    query.reply(self.key, cached[1], attachment=cached[2])
                     self.answered += 1
         except Exception:
             log.exception("queryable %s failed to answer", self.key)
@@ -329,6 +409,7 @@ class Mesh:
         codec: Codec,
         loop: asyncio.AbstractEventLoop,
         security: LoadedSecurity | None = None,
+        budget: BudgetLimits | None = None,
     ) -> None:
         self.node_id = node_id
         self.codec = codec
@@ -338,6 +419,16 @@ class Mesh:
         self._loop = loop
         self._declared: list[Declared] = []
         self._closing: asyncio.Task[None] | None = None
+        self.budget = VerifyBudget(budget)
+        self._intakes: dict[Lane, list[Declared]] = {"control": [], "bulk": []}
+        # One FIFO per writer for every control subscription together, so one writer's
+        # items keep their wire order across subscriptions (a Commander's token is seen
+        # before its assignment) while a flooding writer waits behind its own backlog.
+        self._control: SenderQueues[tuple[Declared, Any]] = SenderQueues(
+            CONTROL_PER_SENDER, CONTROL_SENDERS
+        )
+        self._scheduled = False  # a _pump is on its way to the loop
+        self._turn = 0  # which bulk intake goes first in the next batch
 
     @classmethod
     async def open(cls, cfg: MeshConfig, *, node_id: str, codec: Codec | None = None) -> Mesh:
@@ -395,17 +486,132 @@ class Mesh:
             )
         return self._auth.signer.sign(key, data)
 
-    def _accept(self, key: str, data: bytes, attachment: bytes | None, kind: type[T]) -> T | None:
-        """Decode, then (when secured) verify the signature against the claimed sender."""
-        msg = self.codec.decode(data, kind, key)
-        if msg is None or self._auth is None:
+    def _accept(
+        self,
+        key: str,
+        data: bytes,
+        attachment: bytes | None,
+        kind: type[T],
+        precheck: Precheck | None = None,
+    ) -> T | None:
+        """Cheap checks first, then decode, the subscription's ``precheck``, the signer's
+        budget and, last, the signature (when secured)."""
+        auth = self._auth
+        if auth is None:
+            msg = self.codec.decode(data, kind, key)
+            if msg is not None and precheck is not None and not precheck(key, msg):
+                return None
             return msg
+        verifier = auth.verifier
+        signer, why = verifier.signer_of(attachment)
+        if why is not None or signer is None or attachment is None:
+            self.codec.stats.reject(why or "unsigned", key)
+            return None
+        msg = self.codec.decode(data, kind, key)
+        if msg is None:
+            return None
         sender = getattr(getattr(msg, "h", None), "sender", "")
-        reason = self._auth.verifier.check(key, data, attachment, sender)
-        if reason is not None:
-            self.codec.stats.reject(reason, key, f"claimed sender {sender!r}")
+        if sender != signer:
+            why = "wrong_key" if sender in verifier.identities.members else "unknown_signer"
+            self.codec.stats.reject(why, key, f"claimed sender {sender!r}, key of {signer!r}")
+            return None
+        if not verifier.may_write(signer, key):
+            self.codec.stats.reject("unauthorised_signer", key, f"signer {signer!r}")
+            return None
+        if precheck is not None and not precheck(key, msg):
+            return None
+        if not self.budget.take(signer):
+            self.codec.stats.reject("over_budget", key, f"signer {signer!r}")
+            return None
+        why = verifier.verify(key, data, attachment, signer)
+        if why is not None:
+            self.codec.stats.reject(why, key, f"claimed sender {sender!r}")
             return None
         return msg
+
+    def note_round(self) -> None:
+        """A round started here: every signer's verification budget gains its per-round
+        share (``intake.BudgetLimits``)."""
+        self.budget.note_round()
+
+    # -- intake: zenoh threads -> loop ------------------------------------------------------
+
+    def _sender_of(self, key: str, attachment: bytes | None) -> tuple[str, str | None]:
+        """Thread side: whose FIFO a sample goes to, or why it is dropped at once. Secured:
+        the identity whose key id a well-formed attachment names; else the key's writer
+        by the key layout (``wire.writer_of``)."""
+        if self._auth is None:
+            return writer_of(key), None
+        if not attachment:
+            return "", "unsigned"
+        if len(attachment) != ATTACHMENT_BYTES or attachment[0] != SIGNING_VERSION:
+            return "", "bad_attachment"
+        signer = self._auth.verifier.name_of_key_id(bytes(attachment[1:9]))
+        if signer is None:
+            return "", "wrong_key"
+        if self.budget.exhausted(signer):
+            return "", "over_budget"
+        return signer, None
+
+    def _enqueue(self, handle: Declared, sender: Any, item: Any, nbytes: int = 0) -> None:
+        """Thread side: queue ``item`` in ``handle``'s FIFO for ``sender``; drop and count
+        when full (never block, never raise); wake the loop once per batch."""
+        if handle._closed:
+            return
+        raw = handle._raw
+        if raw is None:
+            why = self._control.push(sender, (handle, item), nbytes)
+        else:
+            why = raw.push(sender, item, nbytes)
+        if why is not None:
+            self._dropped(handle, why)
+            if isinstance(handle, Queryable):
+                with contextlib.suppress(Exception):
+                    item.drop()
+            return
+        if not self._scheduled:
+            self._scheduled = True
+            self._to_loop(self._pump)
+
+    def _dropped(self, handle: Declared, why: str) -> None:
+        handle.intake_dropped += 1
+        self.codec.stats.reject(why, handle.key)
+
+    def _pump(self) -> None:
+        """Loop side: every control item, then one batch of bulk items (round robin over
+        bulk intakes and, inside each, over senders); reschedules itself while work is left
+        so other loop work runs between batches."""
+        self._scheduled = False
+        for _ in range(CONTROL_BATCH):
+            entry = self._control.pop()
+            if entry is None:
+                break
+            if not entry[0]._closed:
+                self._take(*entry)
+        bulk = [h for h in self._intakes["bulk"] if h._raw]
+        budget = BULK_BATCH
+        if bulk:
+            self._turn = (self._turn + 1) % len(bulk)
+            order = bulk[self._turn :] + bulk[: self._turn]
+            while budget > 0 and order:
+                for handle in list(order):
+                    raw = handle._raw
+                    item = raw.pop() if raw is not None else None
+                    if item is None:
+                        order.remove(handle)
+                        continue
+                    self._take(handle, item)
+                    budget -= 1
+        left = len(self._control) > 0 or any(h._raw for h in self._intakes["bulk"])
+        if left and not self._scheduled and self._closing is None:
+            self._scheduled = True
+            self._loop.call_soon(self._pump)
+
+    def _take(self, handle: Declared, item: Any) -> None:
+        try:
+            handle._take(item)
+        except Exception:
+            log.exception("%s: handling a sample on %s failed", self.node_id, handle.key)
 
     def _check_open(self) -> None:
         if self._closing is not None:
@@ -419,6 +625,10 @@ class Mesh:
     def _register(self, handle: Declared, entity: _Undeclarable) -> None:
         handle._entity = entity
         self._declared.append(handle)
+
+    def _add_intake(self, handle: Declared) -> None:
+        """Before declaring: the callback may fire as soon as the entity exists."""
+        self._intakes.setdefault(handle.lane, []).append(handle)
 
     # -- publishing -------------------------------------------------------------------------
 
@@ -449,20 +659,35 @@ class Mesh:
         *,
         maxsize: int = 1024,
         on_item: Callable[[tuple[str, T]], object] | None = None,
+        lane: Lane | None = None,
+        precheck: Precheck | None = None,
     ) -> Subscription[T]:
-        """Subscribe to ``key_expr``, decoding payloads as ``kind`` on the loop."""
+        """Subscribe to ``key_expr``, decoding payloads as ``kind`` on the loop. ``lane``
+        defaults by key (``wire.traffic_lane``); ``maxsize`` bounds the decoded queue and
+        each sender's FIFO; ``precheck`` runs before the signature is verified."""
         self._check_open()
-        sub: Subscription[T] = Subscription(self, key_expr, kind, maxsize, on_item)
+        sub: Subscription[T] = Subscription(self, key_expr, kind, maxsize, on_item, lane, precheck)
 
         def on_sample(sample: zenoh.Sample) -> None:
-            att = sample.attachment
-            self._to_loop(
-                sub._deliver,
-                str(sample.key_expr),
-                sample.payload.to_bytes(),
-                att.to_bytes() if att is not None else None,
-            )
+            try:
+                key = str(sample.key_expr)
+                if len(sample.payload) > MAX_PAYLOAD_BYTES:
+                    self._dropped(sub, "oversize")
+                    return
+                att = sample.attachment
+                attachment = att.to_bytes() if att is not None else None
+                sender, why = self._sender_of(key, attachment)
+                if why is None and sub._raw is not None and not sub._raw.admit(sender):
+                    why = "over_rate"
+                if why is not None:
+                    self._dropped(sub, why)
+                    return
+                data = sample.payload.to_bytes()
+                self._enqueue(sub, sender, (key, data, attachment), len(data))
+            except Exception:  # never into zenoh's thread: counted, the sample dropped
+                self._dropped(sub, "intake_error")
 
+        self._add_intake(sub)
         handler = zenoh.handlers.Callback(on_sample, indirect=False)
         self._register(sub, self._session.declare_subscriber(key_expr, handler))
         return sub
@@ -476,12 +701,13 @@ class Mesh:
     ) -> LivelinessWatch:
         """Liveliness PUT/DELETE events as ``(key, alive)``, with tokens already alive first."""
         self._check_open()
-        watch = LivelinessWatch(self, key_expr, maxsize, on_item)
+        watch = LivelinessWatch(self, key_expr, maxsize, on_item, "control")
 
         def on_sample(sample: zenoh.Sample) -> None:
-            alive = sample.kind == zenoh.SampleKind.PUT
-            self._to_loop(watch._offer, (str(sample.key_expr), alive))
+            key = str(sample.key_expr)
+            self._enqueue(watch, writer_of(key), (key, sample.kind == zenoh.SampleKind.PUT))
 
+        self._add_intake(watch)
         handler = zenoh.handlers.Callback(on_sample, indirect=False)
         sub = self._session.liveliness().declare_subscriber(key_expr, handler, history=True)
         self._register(watch, sub)
@@ -506,8 +732,9 @@ class Mesh:
         queryable = Queryable(self, key, provider)
 
         def on_query(query: zenoh.Query) -> None:
-            self._to_loop(queryable._answer, query)
+            self._enqueue(queryable, "q", query)
 
+        self._add_intake(queryable)
         handler = zenoh.handlers.Callback(on_query, indirect=False)
         self._register(queryable, self._session.declare_queryable(key, handler))
         return queryable
@@ -524,9 +751,14 @@ class Mesh:
             if not done.done():
                 done.set_result(None)
 
+        taken = [0]  # replies handed to the loop (counted thread side: raw grows later)
+
         def on_reply(reply: zenoh.Reply) -> None:
             sample = reply.ok
-            if sample is not None:
+            if sample is not None and len(sample.payload) <= MAX_PAYLOAD_BYTES:
+                taken[0] += 1
+                if taken[0] > MAX_REPLIES:
+                    return
                 att = sample.attachment
                 item = (
                     str(sample.key_expr),
@@ -559,6 +791,9 @@ class Mesh:
         """Undeclare one handle (already marked closed) in a worker thread."""
         if handle in self._declared:
             self._declared.remove(handle)
+        lane = self._intakes.get(handle.lane, [])
+        if handle in lane:
+            lane.remove(handle)
         entity, handle._entity = handle._entity, None
         if entity is not None and self._closing is None:
             await asyncio.to_thread(_undeclare_all, [entity])

@@ -125,14 +125,17 @@ class PeerLink:
         self._started = True
         keys, mesh = self._keys, self._mesh
         self._handles = [
-            mesh.subscribe(keys.inbox(self.uav, "*"), InboxMessage, on_item=self._on_inbox),
-            mesh.subscribe(keys.broadcast("*"), InboxMessage, on_item=self._on_broadcast),
+            mesh.subscribe(keys.inbox(self.uav, "*"), InboxMessage, on_item=self._on_inbox,
+                           precheck=self._precheck_inbox),
+            mesh.subscribe(keys.broadcast("*"), InboxMessage, on_item=self._on_broadcast,
+                           precheck=self._precheck_broadcast),
             mesh.watch_liveliness(keys.alive_uav("*"), on_item=self._on_alive),
-        ]
+        ]  # fmt: skip
         if self.track_neighbours:
             self._handles.append(
-                mesh.subscribe(keys.state("*"), StateBeacon, on_item=self._on_beacon)
-            )
+                mesh.subscribe(keys.state("*"), StateBeacon, on_item=self._on_beacon,
+                               precheck=self._precheck_beacon)
+            )  # fmt: skip
         if self.announce:
             self._handles.append(mesh.declare_queryable(keys.state(self.uav), lambda: self._own))
             self._token = mesh.declare_token(keys.alive_uav(self.uav))
@@ -178,6 +181,7 @@ class PeerLink:
         )
         self._own = beacon
         self.inbox.note_position(round, pos)
+        self._mesh.note_round()  # every peer's verification budget gains a round's share
         self._mesh.put(self._keys.state(self.uav), beacon)
 
     async def send(
@@ -238,6 +242,60 @@ class PeerLink:
         messages of rounds up to ``max_round`` (later ones stay queued), sorted by
         (sender, seq). Missing ones are counted."""
         return await self.inbox.collect(expect, timeout_s, max_round=max_round)
+
+    def _refusal(self, key: str, msg: InboxMessage, broadcast: bool) -> str | None:
+        """Why ``msg`` on ``key`` is refused by the checks that need neither its signature
+        nor any state change, or None. "own" means our own broadcast (not counted)."""
+        sender = msg.h.sender
+        expected_key = (
+            self._keys.broadcast(sender) if broadcast else self._keys.inbox(self.uav, sender)
+        )
+        if key != expected_key:
+            return "spoofed_sender"
+        if msg.to != (BROADCAST if broadcast else self.uav):
+            return "wrong_recipient"
+        if sender == self.uav:
+            return "own"
+        if sender not in self._roster:
+            return "unknown_sender"
+        if self.inbox.too_old(msg.round):
+            return "no_own_position"  # what collect would say: nothing to judge its reach by
+        return self.inbox.admit(msg) or self._replay.would_refuse(
+            msg.h, stream="broadcast" if broadcast else "inbox"
+        )
+
+    def _precheck(self, key: str, msg: InboxMessage, broadcast: bool) -> bool:
+        """Before the signature is verified (``Mesh.subscribe(precheck=)``): everything
+        cheap, so a flood of messages that could not be accepted costs no verification."""
+        why = self._refusal(key, msg, broadcast)
+        if why is None:
+            return True
+        if why != "own":
+            self.inbox.reject(why, key)
+        return False
+
+    def _precheck_inbox(self, key: str, msg: InboxMessage) -> bool:
+        return self._precheck(key, msg, False)
+
+    def _precheck_broadcast(self, key: str, msg: InboxMessage) -> bool:
+        return self._precheck(key, msg, True)
+
+    def _precheck_beacon(self, key: str, beacon: StateBeacon) -> bool:
+        """The beacon checks that need no signature and change nothing; the rest (replay
+        order, motion) run on the verified beacon."""
+        if beacon.uav == self.uav:
+            return False
+        if key != self._keys.state(beacon.uav) or beacon.h.sender != beacon.uav:
+            self.inbox.reject("spoofed_beacon", key)
+            return False
+        known = self.limits.known_peers
+        if known is not None and beacon.uav not in known:
+            self.inbox.reject("unknown_peer", key)
+            return False
+        if self._replay.would_refuse(beacon.h, stream="beacon") is not None:
+            self.inbox.reject("stale_beacon", key)
+            return False
+        return True
 
     def _accept(self, key: str, msg: InboxMessage, *, broadcast: bool) -> None:
         sender = msg.h.sender

@@ -543,13 +543,48 @@ def last_chunk(key: str) -> str:
 T = TypeVar("T", bound=msgspec.Struct)
 
 
+BULK_LEAVES: Final = frozenset({"broadcast", "experience", "state", "report", "approval"})
+
+
+def traffic_lane(key_expr: str) -> str:
+    """``"bulk"`` for peer traffic that may come in floods and can wait a little (messages,
+    beacons, experience, reports, approval status); ``"control"`` for the rest (liveliness,
+    the world's perceptions, rewards and commands, the Commander's context and assignments,
+    a central node's answers), which a receiver serves first (``mesh.py``)."""
+    if "/inbox/" in key_expr:
+        return "bulk"
+    return "bulk" if last_chunk(key_expr) in BULK_LEAVES else "control"
+
+
+_WRITER_OF_AREA: Final = {"cmdr": "cmdr", "sim": "world", "central": "central",
+                           "operator": "operator"}  # fmt: skip
+
+
+def writer_of(key: str) -> str:
+    """Who writes ``key`` under the swarm's key layout (``Keys``): the UAV of its prefix, the
+    sender slot of an inbox, the owner of a liveliness token, or the ground node of its
+    area; the key itself when it follows no rule. The ACL makes this the real writer in a
+    secured swarm; receivers use it to keep one FIFO per sender (``mesh.py``)."""
+    parts = key.split("/")
+    rest = parts[2:] if len(parts) > 2 else []
+    if len(rest) >= 2 and rest[0] == "uav":
+        return rest[3] if len(rest) >= 4 and rest[2] == "inbox" else rest[1]
+    if len(rest) >= 2 and rest[0] == "alive":
+        return rest[2] if rest[1] == "uav" and len(rest) >= 3 else rest[1]
+    if rest:
+        return _WRITER_OF_AREA.get(rest[0], key)
+    return key
+
+
 class DecodeStats:
-    """Counts rejected payloads and keeps the log quiet (one line per reason per interval)."""
+    """Counts rejected payloads and keeps the log quiet (one line per reason per interval).
+    Thread-safe: a Zenoh callback counts what it drops before it reaches the loop."""
 
     def __init__(self, log_interval_s: float = 5.0) -> None:
         self.rejected: Counter[str] = Counter()
         self._interval = log_interval_s
         self._last_log: dict[str, float] = {}
+        self._lock = threading.Lock()
 
     @property
     def total(self) -> int:
@@ -559,17 +594,19 @@ class DecodeStats:
         """Count under ``reason``, a fixed category: payload-derived text goes in ``detail``
         (logged only), so a flood of distinct bad payloads cannot grow the counter or
         defeat the rate limit."""
-        self.rejected[reason] += 1
-        now = time.monotonic()
-        if now - self._last_log.get(reason, -1e9) >= self._interval:
+        with self._lock:
+            self.rejected[reason] += 1
+            now = time.monotonic()
+            if now - self._last_log.get(reason, -1e9) < self._interval:
+                return
             self._last_log[reason] = now
-            log.warning(
-                "dropped payload on %s: %s%s (%d so far)",
-                key,
-                reason,
-                f": {detail[:80]}" if detail else "",
-                self.rejected[reason],
-            )
+        log.warning(
+            "dropped payload on %s: %s%s (%d so far)",
+            key,
+            reason,
+            f": {detail[:80]}" if detail else "",
+            self.rejected[reason],
+        )
 
 
 class Codec:
@@ -698,6 +735,17 @@ class ReplayFilter:
                     return "epoch_contested"
         self._latest[header.sender] = _Window(header.epoch, now, {stream: header.seq})
         return None
+
+    def would_refuse(self, header: Header, *, stream: str = "") -> str | None:
+        """What ``check`` would certainly say without recording anything: ``replay`` (this
+        epoch, a sequence number already passed) or ``old_epoch``; None otherwise. Cheap,
+        so receivers run it before verifying a signature."""
+        prev = self._latest.get(header.sender)
+        if prev is None:
+            return None
+        if header.epoch == prev.epoch:
+            return "replay" if header.seq <= prev.seqs.get(stream, -1) else None
+        return "old_epoch" if header.epoch < prev.epoch else None
 
     def accept(self, header: Header, *, authenticated: bool = False, stream: str = "") -> bool:
         return self.check(header, authenticated=authenticated, stream=stream) is None

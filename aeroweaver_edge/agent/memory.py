@@ -47,6 +47,17 @@ Retrieval (the exact algorithm of DESIGN §5)
     minus the baseline; an unseen skill gets 0. Everything is unweighted. The key is the
     skill name, so every parameterisation shares its skill's advantage.
 
+Peers' share (issue 22: one compromised peer stored 8-12k records in every peer and made
+    >99 % of a role's memory its own)
+    A peer's records are stored at most ``max_records_per_sender`` rows and
+    ``max_bytes_per_sender`` bytes (state text, invocation and tokens) per sender; beyond
+    that, that sender's *oldest* stored records are evicted first (nobody else's), down to
+    7/8 of the caps at once (so a flood at the cap costs one recount per cap/8 records). In a
+    neighbourhood, a peer holding more records of the (task, role) group than this daemon
+    itself (honest same-role peers hold about as many) gets at most
+    ``max_sender_share`` of the K places; the places it loses go to the next-best records
+    of others. Own records are never capped or evicted.
+
 Speed
     SQLite is the durable store; retrieval runs on an in-memory inverted index per
     (task, role), loaded lazily from the table on first use and kept in sync on every
@@ -83,6 +94,13 @@ from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.wire import MAX_TEXT, ExperienceRecord, Header
 
 log = logging.getLogger(__name__)
+
+MAX_RECORDS_PER_SENDER: Final = 4096
+"""Peers' records stored per sender (oldest evicted first): about 170 episodes of 24 rounds."""
+MAX_BYTES_PER_SENDER: Final = 4 * 1024 * 1024
+"""Peers' stored text (state, invocation, tokens) per sender."""
+MAX_SENDER_SHARE: Final = 0.5
+"""Most of a neighbourhood one over-represented peer may fill (see the module docstring)."""
 
 SMALL_GROUP: Final = 2048
 """Largest (task, role) group scored in plain Python; larger ones use numpy."""
@@ -142,6 +160,7 @@ CREATE TABLE IF NOT EXISTS records (
     UNIQUE (run, uav, episode, round)
 );
 CREATE INDEX IF NOT EXISTS records_by_role ON records (task, role, seq);
+CREATE INDEX IF NOT EXISTS records_by_origin ON records (origin, seq);
 CREATE TABLE IF NOT EXISTS rewards (
     run     TEXT    NOT NULL,
     uav     TEXT    NOT NULL,
@@ -226,8 +245,13 @@ class _Group:
     """In-memory inverted index of one (task, role): position i = i-th record by seq."""
 
     __slots__ = (
+        "dead",
         "final",
         "keys",
+        "origin",
+        "origin_count",
+        "origin_ids",
+        "origins",
         "pos",
         "postings",
         "ret",
@@ -249,9 +273,22 @@ class _Group:
         self.postings: dict[str, array[int]] = {}
         self.pos: dict[RunKey, int] = {}
         self.keys: list[RunKey] = []
+        self.origin = array("i")  # id into origins ("" = this daemon's own)
+        self.origins: list[str] = []
+        self.origin_ids: dict[str, int] = {}
+        self.origin_count: list[int] = []  # live records per origin id
+        self.dead = 0  # evicted positions (never eligible; the group is rebuilt when many)
 
     def __len__(self) -> int:
         return len(self.seq)
+
+    def remove(self, key: RunKey) -> None:
+        """An evicted record: never eligible again (positions stay, so the order does)."""
+        i = self.pos.pop(key, None)
+        if i is not None:
+            self.ret[i] = math.nan
+            self.origin_count[self.origin[i]] -= 1
+            self.dead += 1
 
     def add(
         self,
@@ -261,8 +298,16 @@ class _Group:
         skill: str,
         ret: float | None,
         final: bool,
+        origin: str = LOCAL,
     ) -> None:
         i = len(self.seq)
+        oid = self.origin_ids.get(origin)
+        if oid is None:
+            oid = self.origin_ids[origin] = len(self.origins)
+            self.origins.append(origin)
+            self.origin_count.append(0)
+        self.origin.append(oid)
+        self.origin_count[oid] += 1
         n_tokens = 0
         postings = self.postings
         for tok in tokens:
@@ -297,6 +342,9 @@ class ExperienceMemory:
         durable: bool = False,
         run: str | None = None,
         required: bool = False,
+        max_records_per_sender: int = MAX_RECORDS_PER_SENDER,
+        max_bytes_per_sender: int = MAX_BYTES_PER_SENDER,
+        max_sender_share: float = MAX_SENDER_SHARE,
     ) -> None:
         """``durable=True`` sets ``synchronous=FULL`` (commits survive power loss); the
         default ``NORMAL`` is crash-consistent and may lose the last commits on power loss,
@@ -307,6 +355,15 @@ class ExperienceMemory:
             raise ValueError(f"gamma {gamma} must be within [0, 1]")
         if neighbourhood < 1:
             raise ValueError(f"neighbourhood {neighbourhood} must be at least 1")
+        if max_records_per_sender < 1 or max_bytes_per_sender < 1:
+            raise ValueError("per-sender caps must be at least 1")
+        if not 0.0 < max_sender_share <= 1.0:
+            raise ValueError(f"max_sender_share {max_sender_share} must be within (0, 1]")
+        self.max_records_per_sender = max_records_per_sender
+        self.max_bytes_per_sender = max_bytes_per_sender
+        self.max_sender_share = max_sender_share
+        self.evicted = 0  # peers' records evicted by the per-sender caps
+        self._usage: dict[str, list[int]] | None = None  # origin -> [records, bytes]
         self.path = Path(path) if path is not None else None
         self.gamma = gamma
         self.neighbourhood = neighbourhood
@@ -566,12 +623,13 @@ class ExperienceMemory:
         group = self._groups.get((task, role))
         if group is None:
             group = _Group()
-            for seq, run, uav, episode, rnd, tokens, skill, ret, final in self._db.execute(
-                "SELECT seq, run, uav, episode, round, tokens, skill, ret, final FROM records "
-                "WHERE task = ? AND role = ? ORDER BY seq",
+            for seq, run, uav, episode, rnd, tokens, skill, ret, final, origin in self._db.execute(
+                "SELECT seq, run, uav, episode, round, tokens, skill, ret, final, origin "
+                "FROM records WHERE task = ? AND role = ? ORDER BY seq",
                 (task, role),
             ):
-                group.add((run, uav, episode, rnd), seq, tokens.split(), skill, ret, bool(final))
+                key = (run, uav, episode, rnd)
+                group.add(key, seq, tokens.split(), skill, ret, bool(final), origin)
             self._groups[(task, role)] = group
         return group
 
@@ -748,8 +806,16 @@ class ExperienceMemory:
         tokens = tokenise(record.state_text)
         version = (record.final, record.h.epoch, record.h.seq)
 
+        origin = record.h.sender or "?"
+        tokens_text = " ".join(sorted(tokens))
+        size = len(record.state_text) + len(record.invocation) + len(tokens_text)
+        evicted: list[tuple[str, str, RunKey]] = []
+        inserted = [False]
+
         def go() -> tuple[int, str, str] | None:
             """(seq, task, role) of the inserted or updated row, or None if unchanged."""
+            evicted.clear()
+            inserted[0] = False
             with self._tx():
                 row = self._db.execute(
                     "SELECT seq, origin, final, src_epoch, src_seq, reward, ret, task, role "
@@ -757,6 +823,8 @@ class ExperienceMemory:
                     key,
                 ).fetchone()
                 if row is None:
+                    if not self._make_room(origin, size, evicted):
+                        return None
                     cur = self._db.execute(
                         "INSERT INTO records (run, task, role, uav, episode, round, state_text, "
                         "tokens, skill, invocation, reward, ret, final, origin, reward_source, "
@@ -770,13 +838,13 @@ class ExperienceMemory:
                             record.episode,
                             record.round,
                             record.state_text,
-                            " ".join(sorted(tokens)),
+                            tokens_text,
                             skill,
                             record.invocation,
                             record.reward,
                             record.ret,
                             int(record.final),
-                            record.h.sender or "?",
+                            origin,
                             record.reward_source,
                             record.h.epoch,
                             record.h.seq,
@@ -784,13 +852,16 @@ class ExperienceMemory:
                         ),
                     )
                     assert cur.lastrowid is not None
+                    inserted[0] = True
                     return cur.lastrowid, record.task, record.role
-                seq, origin, final, epoch, src_seq, reward, ret, task, role = row
-                if origin == LOCAL or version <= (bool(final), epoch, src_seq):
+                seq, old_origin, final, epoch, src_seq, reward, ret, task, role = row
+                if old_origin == LOCAL or version <= (bool(final), epoch, src_seq):
                     return None
+                if old_origin != origin:
+                    return None  # a record stays its first sender's (and counts to it)
                 self._db.execute(
                     "UPDATE records SET reward = ?, ret = ?, final = ?, reward_source = ?, "
-                    "src_epoch = ?, src_seq = ?, origin = ? WHERE seq = ?",
+                    "src_epoch = ?, src_seq = ? WHERE seq = ?",
                     (
                         record.reward,
                         record.ret,
@@ -798,7 +869,6 @@ class ExperienceMemory:
                         record.reward_source,
                         record.h.epoch,
                         record.h.seq,
-                        record.h.sender or "?",
                         seq,
                     ),
                 )
@@ -806,18 +876,89 @@ class ExperienceMemory:
                     return None  # a newer copy of the same content
                 return seq, task, role
 
-        done = self._guard("ingest", None, go, own=False)
+        try:
+            done = self._guard("ingest", None, go, own=False)
+        except BaseException:
+            self._usage = None  # the transaction may have rolled back: recount next time
+            raise
+        self._forget_evicted(evicted)
         if done is None:
+            if evicted:  # rolled back or refused after eviction: recount next time
+                self._usage = None
             return False
+        if inserted[0]:
+            usage = self._sender_usage(origin)
+            usage[0] += 1
+            usage[1] += size
         group = self._groups.get((done[1], done[2]))
+        i = group.pos.get(key) if group is not None else None
         if group is not None:
-            i = group.pos.get(key)
             if i is None:
-                group.add(key, done[0], tokens, skill, record.ret, record.final)
+                group.add(key, done[0], tokens, skill, record.ret, record.final, origin)
             else:
                 group.ret[i] = math.nan if record.ret is None else record.ret
                 group.final[i] = 1 if record.final else 0
         return True
+
+    def _sender_usage(self, origin: str) -> list[int]:
+        """[records, bytes] stored of ``origin`` (peers only), counted once per open."""
+        if self._usage is None:
+            self._usage = {
+                o: [n, b]
+                for o, n, b in self._db.execute(
+                    "SELECT origin, count(*), coalesce(sum(length(state_text) + "
+                    "length(invocation) + length(tokens)), 0) FROM records "
+                    "WHERE origin != '' GROUP BY origin"
+                )
+            }
+        return self._usage.setdefault(origin, [0, 0])
+
+    def _make_room(self, origin: str, size: int, evicted: list[tuple[str, str, RunKey]]) -> bool:
+        """Inside the ingest transaction: evict ``origin``'s oldest records until one more
+        of ``size`` bytes fits its caps. False if it can never fit (larger than the cap)."""
+        cap_n, cap_b = self.max_records_per_sender, self.max_bytes_per_sender
+        if size > cap_b:
+            return False
+        n, b = self._sender_usage(origin)
+        if n + 1 <= cap_n and b + size <= cap_b:
+            return True
+        # Near the cap: count exactly (another process may write this file too).
+        n, b = self._db.execute(
+            "SELECT count(*), coalesce(sum(length(state_text) + length(invocation) + "
+            "length(tokens)), 0) FROM records WHERE origin = ?",
+            (origin,),
+        ).fetchone()
+        gone: list[int] = []
+        if n + 1 > cap_n or b + size > cap_b:
+            # Down to 7/8 of the caps at once: the next cap/8 records need no recount.
+            cap_n, cap_b = cap_n - max(1, cap_n // 8), cap_b - cap_b // 8
+            cur = self._db.execute(
+                "SELECT seq, task, role, run, uav, episode, round, length(state_text) + "
+                "length(invocation) + length(tokens) FROM records WHERE origin = ? ORDER BY seq",
+                (origin,),
+            )
+            for seq, task, role, run, uav, episode, rnd, nbytes in cur:
+                if n + 1 <= cap_n and b + size <= cap_b:
+                    break
+                gone.append(seq)
+                evicted.append((task, role, (run, uav, episode, rnd)))
+                n, b = n - 1, b - nbytes
+            cur.close()
+            self._db.executemany("DELETE FROM records WHERE seq = ?", [(q,) for q in gone])
+        usage = self._sender_usage(origin)
+        usage[0], usage[1] = n, b
+        return True
+
+    def _forget_evicted(self, evicted: list[tuple[str, str, RunKey]]) -> None:
+        """Drop evicted records from the retrieval index; rebuild a group once half dead."""
+        self.evicted += len(evicted)
+        for task, role, key in evicted:
+            group = self._groups.get((task, role))
+            if group is None:
+                continue
+            group.remove(key)
+            if group.dead > max(256, len(group) // 2):
+                del self._groups[(task, role)]  # reloaded from the table on next use
 
     # ------------------------------------------------------------------ reading
 
@@ -862,17 +1003,59 @@ class ExperienceMemory:
         return int(self._db.execute("SELECT count(*) FROM records").fetchone()[0])
 
     def _select(self, group: _Group, tokens: frozenset[str]) -> tuple[list[int], list[float]]:
-        """Positions of the neighbourhood (best first) and their Jaccard similarities."""
+        """Positions of the neighbourhood (best first) and their Jaccard similarities.
+        Peers holding more of the group than this daemon are capped to
+        ``max_sender_share`` of the places (none in a balanced, honest swarm: then this is
+        exactly the uncapped selection)."""
+        k = self.neighbourhood
+        heavy = self._heavy_origins(group)
+        if heavy:
+            k = len(group)  # the whole order, then the capped pick below
         if len(group) > SMALL_GROUP:
-            return self._select_numpy(group, tokens)
-        return self._select_python(group, tokens)
+            pos, sim = self._select_numpy(group, tokens, k)
+        else:
+            pos, sim = self._select_python(group, tokens, k)
+        if not heavy:
+            return pos, sim
+        return self._capped(group, pos, sim, heavy)
+
+    def _heavy_origins(self, group: _Group) -> set[int]:
+        """Peers (origin ids) with more live records in ``group`` than this daemon's own."""
+        if self.max_sender_share >= 1.0:
+            return set()
+        own_id = group.origin_ids.get(LOCAL)
+        own = group.origin_count[own_id] if own_id is not None else 0
+        return {
+            oid for oid, n in enumerate(group.origin_count) if oid != own_id and n > max(own, 0)
+        }
+
+    def _capped(
+        self, group: _Group, pos: list[int], sim: list[float], heavy: set[int]
+    ) -> tuple[list[int], list[float]]:
+        """The best-first ``pos`` cut to K places with each heavy origin at most its cap."""
+        cap = max(1, int(self.max_sender_share * self.neighbourhood))
+        taken: dict[int, int] = {}
+        out_pos: list[int] = []
+        out_sim: list[float] = []
+        for i, s in zip(pos, sim, strict=True):
+            oid = group.origin[i]
+            if oid in heavy:
+                if taken.get(oid, 0) >= cap:
+                    continue
+                taken[oid] = taken.get(oid, 0) + 1
+            out_pos.append(i)
+            out_sim.append(s)
+            if len(out_pos) >= self.neighbourhood:
+                break
+        return out_pos, out_sim
 
     def _eligible(self, group: _Group, i: int) -> bool:
         return not math.isnan(group.ret[i]) and (not self.finalised_only or group.final[i] != 0)
 
     def _select_python(
-        self, group: _Group, tokens: frozenset[str]
+        self, group: _Group, tokens: frozenset[str], k: int | None = None
     ) -> tuple[list[int], list[float]]:
+        k = self.neighbourhood if k is None else k
         n = len(group)
         everywhere = 0
         inter: dict[int, int] = {}
@@ -897,10 +1080,13 @@ class ExperienceMemory:
         # best first: similarity desc, then recency (position) desc; the first K of that
         # order are the top K by similarity with ties broken toward the newest.
         scored.sort(key=lambda x: (-x[0], -x[1]))
-        best = scored[: self.neighbourhood]
+        best = scored[:k]
         return [i for _, i in best], [sim for sim, _ in best]
 
-    def _select_numpy(self, group: _Group, tokens: frozenset[str]) -> tuple[list[int], list[float]]:
+    def _select_numpy(
+        self, group: _Group, tokens: frozenset[str], k: int | None = None
+    ) -> tuple[list[int], list[float]]:
+        k = self.neighbourhood if k is None else k
         import numpy as np
 
         n = len(group)
@@ -930,7 +1116,6 @@ class ExperienceMemory:
             return [], []
         ci = inter[cand]
         sim = ci / (np.frombuffer(group.size, dtype=np.int32)[cand] + len(tokens) - ci)
-        k = self.neighbourhood
         if cand.size > k:
             kth = np.partition(sim, cand.size - k)[cand.size - k]  # k-th largest similarity
             above = np.flatnonzero(sim > kth)

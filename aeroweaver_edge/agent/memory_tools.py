@@ -64,6 +64,9 @@ class FileInfo:
     rewarded: int = 0
     runs: set[str] = field(default_factory=set)
     by_task: dict[str, dict[str, int]] = field(default_factory=dict)
+    # who each record came from: a peer (its origin) or this file's own daemon (its uav id);
+    # {"records", "bytes" (state text, invocation, tokens), "shared" (copies of a peer's)}
+    by_sender: dict[str, dict[str, int]] = field(default_factory=dict)
 
 
 def _version(conn: sqlite3.Connection) -> int | None:
@@ -96,6 +99,12 @@ def _info(path: Path, conn: sqlite3.Connection) -> FileInfo:
         "SELECT task, role, count(*) FROM records GROUP BY task, role ORDER BY task, role"
     ):
         info.by_task.setdefault(task, {})[role] = n
+    for sender, n, nbytes, shared in conn.execute(
+        "SELECT CASE WHEN origin != '' THEN origin ELSE uav END AS sender, count(*), "
+        "coalesce(sum(length(state_text) + length(invocation) + length(tokens)), 0), "
+        "coalesce(sum(origin != ''), 0) FROM records GROUP BY sender ORDER BY sender"
+    ):
+        info.by_sender[sender] = {"records": n, "bytes": nbytes, "shared": shared}
     return info
 
 
@@ -113,10 +122,15 @@ def stats(files: list[Path]) -> dict[str, Any]:
         finally:
             conn.close()
     by_task: dict[str, dict[str, int]] = {}
+    by_sender: dict[str, dict[str, int]] = {}
     for info in infos:
         for task, roles in info.by_task.items():
             for role, n in roles.items():
                 by_task.setdefault(task, {})[role] = by_task.get(task, {}).get(role, 0) + n
+        for sender, counts in info.by_sender.items():
+            total = by_sender.setdefault(sender, {"records": 0, "bytes": 0, "shared": 0})
+            for name, n in counts.items():
+                total[name] += n
     return {
         "records": sum(i.records for i in infos),
         "shared_records": sum(i.shared for i in infos),
@@ -125,6 +139,7 @@ def stats(files: list[Path]) -> dict[str, Any]:
         "final_records": sum(i.final for i in infos),
         "runs": len(set().union(*(i.runs for i in infos))) if infos else 0,
         "by_task": {t: dict(sorted(r.items())) for t, r in sorted(by_task.items())},
+        "by_sender": dict(sorted(by_sender.items())),
         "files": [
             {
                 "path": str(i.path),
@@ -132,6 +147,7 @@ def stats(files: list[Path]) -> dict[str, Any]:
                 "records": i.records,
                 "rewards": i.rewards,
                 "runs": sorted(i.runs),
+                "by_sender": i.by_sender,
             }
             for i in infos
         ],

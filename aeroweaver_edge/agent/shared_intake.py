@@ -25,7 +25,9 @@ log = logging.getLogger(__name__)
 
 RecordKey = tuple[str, str, int, int]  # (run, uav, episode, round)
 MAX_PENDING = 65_536  # records waiting for the next round (a flood is refused, counted)
+MAX_PENDING_PER_SENDER = 4096  # of those, one peer's (a flooding peer crowds out no other)
 MAX_EPISODES = 64  # (run, episode) tallies kept
+MAX_TAKEN = 65_536  # records remembered per tally
 
 
 def _version(rec: ExperienceRecord) -> tuple[bool, int, int]:
@@ -35,10 +37,17 @@ def _version(rec: ExperienceRecord) -> tuple[bool, int, int]:
 class SharedIntake:
     """Takes same-role peers' records as they arrive; stores them in canonical order."""
 
-    def __init__(self, uav: str, max_pending: int = MAX_PENDING) -> None:
+    def __init__(
+        self,
+        uav: str,
+        max_pending: int = MAX_PENDING,
+        max_per_sender: int = MAX_PENDING_PER_SENDER,
+    ) -> None:
         self.uav = uav
         self.max_pending = max_pending
+        self.max_per_sender = max_per_sender
         self._pending: dict[RecordKey, ExperienceRecord] = {}
+        self._per_sender: dict[str, int] = {}  # pending records by sender
         self._taken: OrderedDict[tuple[str, int], set[RecordKey]] = OrderedDict()
         self.refused = 0  # not a peer's own record on its own key, or over the bound
         self.stored = 0
@@ -55,15 +64,21 @@ class SharedIntake:
         old = self._pending.get(k)
         if old is not None and _version(old) >= _version(rec):
             return False
-        if old is None and len(self._pending) >= self.max_pending:
+        if old is None and (
+            len(self._pending) >= self.max_pending
+            or self._per_sender.get(rec.uav, 0) >= self.max_per_sender
+        ):
             self.refused += 1
             return False
+        if old is None:
+            self._per_sender[rec.uav] = self._per_sender.get(rec.uav, 0) + 1
         self._pending[k] = rec
         seen = self._taken.setdefault((rec.run, rec.episode), set())
         self._taken.move_to_end((rec.run, rec.episode))
         while len(self._taken) > MAX_EPISODES:
             self._taken.popitem(last=False)
-        seen.add(k)
+        if len(seen) < MAX_TAKEN:
+            seen.add(k)
         return True
 
     def taken(self, run: str, episode: int) -> int:
@@ -79,6 +94,7 @@ class SharedIntake:
         order = sorted(self._pending, key=lambda k: (k[0], k[2], k[1], k[3]))  # run, ep, uav, rnd
         batch = [self._pending[k] for k in order]
         self._pending.clear()
+        self._per_sender.clear()
         changed = 0
         for rec in batch:
             changed += await memory.ingest(rec)

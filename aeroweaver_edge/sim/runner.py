@@ -268,6 +268,7 @@ class WorldRunner:
             refused_before = self.refusals()
             rnd = ep.round
             self._where = (episode, rnd)
+            self.mesh.note_round()  # each UAV's verification budget here gains a round's share
             present = [u for u in controlled if u in self.alive]
             for uav in controlled:
                 if uav not in self.alive:

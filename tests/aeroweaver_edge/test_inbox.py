@@ -72,3 +72,16 @@ def test_a_late_message_of_the_ended_episode_is_not_a_refusal_either() -> None:
     assert inbox.admit(msg(3, 40)) == "future_round"
     assert inbox.admit(msg(4, 10)) == "future_round"  # not the episode's end: a refusal
     assert inbox.admit(msg(5, 1)) is None
+
+
+def test_a_round_older_than_every_kept_position_is_too_old() -> None:
+    """Peer links refuse such a message before its signature (issue 22): collect could only
+    say ``no_own_position`` about it."""
+    inbox = Inbox("b")
+    assert not inbox.too_old(0)  # no position yet: nothing to judge by
+    for r in range(POSITION_MEMORY + 4):
+        inbox.note_position(r, (0.0, 0.0, -5.0))
+    oldest = min(range(POSITION_MEMORY + 4)[-POSITION_MEMORY:])
+    assert inbox.too_old(oldest - 1)
+    assert not inbox.too_old(oldest)
+    assert not inbox.too_old(POSITION_MEMORY + 10)

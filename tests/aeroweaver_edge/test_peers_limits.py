@@ -222,3 +222,28 @@ async def test_a_closed_link_sends_nothing(zenoh_net: ZenohNet) -> None:
     assert await a.send("b", "status", {"n": 1}, round=1) is None
     assert a.stats.dropped["closed"] == 1
     assert a.stats.sent == 0
+
+
+async def test_cheap_refusals_come_before_the_queue(zenoh_net: ZenohNet) -> None:
+    """Issue 22: a message that could never be accepted (wrong recipient, too old to judge,
+    a replay) is refused by the subscription's precheck, before the transport would verify
+    a signature, and never queued."""
+    a, b, mallory = await pair(zenoh_net)
+    for r in range(2, 40):
+        b.publish_beacon(r, HERE, STILL)
+    old = msg("a", 1, 1, round_=1)  # round 1: older than every position b keeps
+    mallory.put(KEYS.inbox("b", "a"), old, block=True)
+    wrong = InboxMessage(h=Header(sender="a", epoch=1, seq=2, stamp=0.0), to="c", round=39,
+                         kind="status", sender_pos=HERE)  # fmt: skip
+    mallory.put(KEYS.inbox("b", "a"), wrong, block=True)
+    await settled(b, 2)
+    assert b.stats.rejected == {"no_own_position": 1, "wrong_recipient": 1}
+    assert b.inbox.pending == 0
+    ref = await a.send("b", "status", {"ok": 1}, round=39)
+    assert ref is not None
+    got = await b.collect_inbox([ref], timeout_s=3.0, max_round=39)
+    assert [m.body for m in got] == [{"ok": 1}]
+    mallory.put(KEYS.inbox("b", "a"), msg("a", 1, ref.seq, round_=39), block=True)  # replay
+    await settled(b, 4)
+    assert b.inbox.pending == 0
+    assert b.stats.rejected["replay"] == 1
