@@ -48,7 +48,14 @@ import msgspec
 import zenoh
 
 from .config import ConfigError, MeshConfig
-from .intake import FIFO_MIN, SAMPLE_RATE, BudgetLimits, SenderQueues, VerifyBudget
+from .intake import (
+    FIFO_MIN,
+    SAMPLE_RATE,
+    BudgetLimits,
+    SenderQueues,
+    VerifyBudget,
+    low_pass_filter,
+)
 from .security.pki import PkiError
 from .security.signing import ATTACHMENT_BYTES
 from .security.signing import VERSION as SIGNING_VERSION
@@ -133,6 +140,9 @@ def zenoh_settings(cfg: MeshConfig, security: LoadedSecurity | None) -> list[tup
         settings.append(("namespace", cfg.namespace))
     if security is not None:
         settings.extend(zenoh_security_settings(security))
+        # Oversize messages die at the first secured hop (a router drops them for every
+        # client), before any process copies or verifies them.
+        settings.append(("low_pass_filter", low_pass_filter()))
     return settings
 
 
