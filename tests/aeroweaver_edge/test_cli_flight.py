@@ -3,6 +3,9 @@ whose vehicle cannot be reached (one clear line, non-zero exit, no traceback).""
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -91,3 +94,23 @@ def test_sim_link_mavsdk_without_the_extra_is_one_line(
     )
     assert main(["sim", "coverage", "--selector", "scripted", "--link", "mavsdk"]) == 2
     assert "pip install 'aeroweaver-edge[mavsdk]'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 0), (signal.SIGINT, 130)])
+def test_emulator_is_a_service_sigterm_exits_0(sig: signal.Signals, code: int) -> None:
+    """systemd stops a service with SIGTERM: a normal end (0); Ctrl-C stays 130."""
+    port = free_udp_ports(1)[0]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "aeroweaver_edge.cli", "emulator", "--uavs", "1",
+         "--port-base", str(port)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        proc.stdout.readline()  # it is up once it says where it listens
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == code, err
+    assert "Traceback" not in err

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import signal
 import sys
 from pathlib import Path
 
@@ -93,6 +94,7 @@ async def _serve(opts: EmulatorOptions, faults: list[Faults], status_every: floa
 
 
 def cmd_emulator(args: argparse.Namespace) -> int:
+    from aeroweaver_edge.cli_runner import Stopped
     from aeroweaver_edge.cli_runner import run_until_signal as _run
 
     try:
@@ -105,6 +107,8 @@ def cmd_emulator(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"aeroweaver emulator: {exc}", file=sys.stderr)
         return 2
+    except Stopped as stop:  # a service's normal end: SIGTERM is 0, Ctrl-C 130
+        return 0 if stop.signum == signal.SIGTERM else 130
     except (KeyboardInterrupt, asyncio.CancelledError):
-        return 0
+        return 130
     return 0
