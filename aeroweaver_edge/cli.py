@@ -68,7 +68,8 @@ def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm, write_json
-    from aeroweaver_edge.orchestration.view import LiveView, print_summary
+    from aeroweaver_edge.orchestration.view import LiveView, print_mission, print_summary
+    from commander.plan import MissionPlan
 
     task, uavs = args.task, args.uavs
     # Everything a user can get wrong is checked here, before any process or session starts
@@ -124,14 +125,20 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
         run = with_console(opts, args.console_host, args.console_port, view)
     else:
-        run = run_swarm(opts, on_round=view.on_round if view else None)
+
+        def planned(plan: MissionPlan) -> None:
+            if view is not None:  # the mission table before the rounds, not after them
+                print_mission(plan.as_dict(), view.console)
+
+        run = run_swarm(opts, on_round=view.on_round if view else None, on_plan=planned)
     try:
         summary = _run(run)
     except (KeyboardInterrupt, Stopped):
         print("aeroweaver: stopped by the operator; every UAV was told to hold", file=sys.stderr)
         return 130
     data = summary.as_dict()
-    print_summary(data)
+    shown = view is not None and not args.console
+    print_summary({**data, "mission": None} if shown else data)
     if args.json:
         write_json(summary, Path(args.json))
         print(f"summary written to {args.json}")
