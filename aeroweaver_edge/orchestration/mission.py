@@ -229,9 +229,7 @@ async def start_mission(
                 for u, p in sorted(commander.board.uavs.items(), key=lambda kv: natural(kv[0]))
             }
             out.update(_contact_fields(contact, runner))
-            out["security"] = mission_security(
-                mesh, world_mesh, commander.board, runner, before
-            )
+            out["security"] = mission_security(mesh, world_mesh, commander.board, runner, before)
             await asyncio.sleep(0.2)  # let the ended context leave before the session closes
     out["wall_s"] = round(time.monotonic() - started, 3)
     return out

@@ -106,8 +106,12 @@ def test_emulated_field_swarm_flies_two_missions_in_a_row(tmp_path: Path) -> Non
             assert "security" in rec
             outs.append(out)
             # landed before the next one: the daemons wait for the touch-down themselves
-            assert wait_until(lambda n=n: all(  # type: ignore[misc]
-                procs.log(u).count("flight phase mission -> landing") >= n for u in UAVS), 30)
+            assert wait_until(
+                lambda n=n: all(  # type: ignore[misc]
+                    procs.log(u).count("flight phase mission -> landing") >= n for u in UAVS
+                ),
+                30,
+            )
         for out in outs:
             assert re.search(r"^uav0 ready as searcher$", out, re.M)
             rounds = re.findall(r"^round +\d+ \| uav0 r\d+ .*\| uav2 ", out, re.M)
