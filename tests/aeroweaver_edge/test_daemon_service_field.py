@@ -71,7 +71,13 @@ def test_secured_daemons_fly_two_missions_in_a_row(tmp_path: Path) -> None:
     assert len(re.findall(r"uav0: mission \S+ ended", procs.log("uav0"))) == 2
 
 
-def test_emulated_field_swarm_flies_two_missions_in_a_row(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("backend", "host"),
+    [("mavlink", "127.0.0.1"), pytest.param("mavsdk", "0.0.0.0", marks=pytest.mark.mavsdk)],
+)
+def test_emulated_field_swarm_flies_two_missions_in_a_row(
+    tmp_path: Path, backend: str, host: str
+) -> None:
     swarm = unique_namespace("fld")
     procs = Procs(tmp_path)
     conf, router = router_config(tmp_path)
@@ -85,8 +91,8 @@ def test_emulated_field_swarm_flies_two_missions_in_a_row(tmp_path: Path) -> Non
         for i, uav in enumerate(UAVS):
             cfg = daemon_config(
                 tmp_path, uav, swarm, router,
-                extra=f'round_s = 0.5\n[vehicle]\nbackend = "mavlink"\n'
-                f'url = "udpin://127.0.0.1:{base + i}"\n'
+                extra=f'round_s = 0.5\n[vehicle]\nbackend = "{backend}"\n'
+                f'url = "udpin://{host}:{base + i}"\n'
                 f'[[field.points]]\nid = "L{i}"\nkind = "landmark"\nnorth = {4 + 3 * i}.0\n'
                 "east = 3.0\n",
             )  # fmt: skip
@@ -122,6 +128,6 @@ def test_emulated_field_swarm_flies_two_missions_in_a_row(tmp_path: Path) -> Non
         procs.stop_all()
     log = procs.log("uav1")
     assert "uav1 up: swarm" in log
-    assert "vehicle mavlink udpin://" in log
+    assert f"vehicle {backend} udpin://" in log
     assert log.count("flight phase ground -> preflight (mission assigned)") == 2
     assert "flight phase landing -> ground (landed; ready for the next mission)" in log
