@@ -173,8 +173,8 @@ STOP_BOUND_S = 2.0
 
 
 class StopBound:
-    """A stop by signal ends the process within ``bound_s`` of the daemon's own clean-up
-    (hold or land, report, close the link): what may still be running then -- a model
+    """A stop by signal ends the process at most ``bound_s`` after the daemon's own flight
+    clean-up (hold or land, report, close the link): what may still be running then -- a model
     loading in a thread that cannot be cancelled, an LLM server finishing a request --
     holds nothing that matters, and systemd (or the operator) should not wait for it.
     The flight clean-up itself (``UavDaemon.running``) is never cut short."""
@@ -187,9 +187,9 @@ class StopBound:
         threading.Thread(target=self._watch, args=(status,), name="stop-bound", daemon=True).start()
 
     def _watch(self, status: int) -> None:
-        deadline = time.monotonic() + self.bound_s
-        while time.monotonic() < deadline or (self.daemon is not None and self.daemon.running):
+        while self.daemon is not None and self.daemon.running:  # holding, landing, reporting
             time.sleep(0.05)
+        time.sleep(self.bound_s)  # then the rest of the clean-up (closing the session) gets this
         logging.getLogger("aeroweaver").info(
             "stopping: clean-up still running %.0f s after the stop; exiting now", self.bound_s
         )
