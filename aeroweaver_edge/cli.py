@@ -74,7 +74,8 @@ def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm, write_json
-    from aeroweaver_edge.orchestration.view import LiveView, print_summary
+    from aeroweaver_edge.orchestration.view import LiveView, print_mission, print_summary
+    from commander.plan import MissionPlan
 
     task, uavs = args.task, args.uavs
     # Everything a user can get wrong is checked here, before any process or session starts
@@ -130,14 +131,20 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
         run = with_console(opts, args.console_host, args.console_port, view)
     else:
-        run = run_swarm(opts, on_round=view.on_round if view else None)
+
+        def planned(plan: MissionPlan) -> None:
+            if view is not None:  # the mission table before the rounds, not after them
+                print_mission(plan.as_dict(), view.console)
+
+        run = run_swarm(opts, on_round=view.on_round if view else None, on_plan=planned)
     try:
         summary = _run(run)
     except (KeyboardInterrupt, Stopped):
         print("aeroweaver: stopped by the operator; every UAV was told to hold", file=sys.stderr)
         return 130
     data = summary.as_dict()
-    print_summary(data)
+    shown = view is not None and not args.console
+    print_summary({**data, "mission": None} if shown else data)
     if args.json:
         write_json(summary, Path(args.json))
         print(f"summary written to {args.json}")
@@ -172,8 +179,8 @@ STOP_BOUND_S = 2.0
 
 
 class StopBound:
-    """A stop by signal ends the process within ``bound_s`` of the daemon's own clean-up
-    (hold or land, report, close the link): what may still be running then -- a model
+    """A stop by signal ends the process at most ``bound_s`` after the daemon's own flight
+    clean-up (hold or land, report, close the link): what may still be running then -- a model
     loading in a thread that cannot be cancelled, an LLM server finishing a request --
     holds nothing that matters, and systemd (or the operator) should not wait for it.
     The flight clean-up itself (``UavDaemon.running``) is never cut short."""
@@ -186,9 +193,9 @@ class StopBound:
         threading.Thread(target=self._watch, args=(status,), name="stop-bound", daemon=True).start()
 
     def _watch(self, status: int) -> None:
-        deadline = time.monotonic() + self.bound_s
-        while time.monotonic() < deadline or (self.daemon is not None and self.daemon.running):
+        while self.daemon is not None and self.daemon.running:  # holding, landing, reporting
             time.sleep(0.05)
+        time.sleep(self.bound_s)  # then the rest of the clean-up (closing the session) gets this
         logging.getLogger("aeroweaver").info(
             "stopping: clean-up still running %.0f s after the stop; exiting now", self.bound_s
         )

@@ -119,6 +119,14 @@ def routing(task: str, radius_m: float) -> Reach:
     return reach
 
 
+def _end_reason(ctx: MissionContext | None) -> str:
+    """Why the Commander ended the mission (its ``ended: ...`` constraint), or ""."""
+    if ctx is None or ctx.state != "ended":
+        return ""
+    ended = [c.removeprefix("ended: ") for c in ctx.constraints if c.startswith("ended: ")]
+    return ended[-1] if ended else ""
+
+
 class UavDaemon:
     def __init__(
         self,
@@ -509,11 +517,7 @@ class UavDaemon:
         if self._logged_mission is not None and not self.mission.commander_lost:
             rounds, holds, causes = self._mission_start_stats
             by = {c: n - causes.get(c, 0) for c, n in s.holds_by_cause.items()}
-            ctx = self.mission.context
-            why = next(
-                (c[len("ended: "):] for c in reversed(ctx.constraints) if c.startswith("ended: ")),
-                "",
-            ) if ctx is not None and ctx.state == "ended" else ""
+            why = _end_reason(self.mission.context)
             log.info(
                 "%s: mission %s ended%s: %d rounds, %d holds%s",
                 self.uav, self._logged_mission, f" ({why})" if why else "",

@@ -147,8 +147,10 @@ class DaemonSet:
                 out[uav] = f"{type(t.exception()).__name__}: {t.exception()}"
         for uav, p in self.procs.items():
             if uav not in self.killed and p.returncode not in (None, 0):
-                tail = (self.workdir / f"{uav}.log").read_text(errors="replace")[-2000:]
-                out[uav] = f"exit {p.returncode}: {tail}"
+                tail = (self.workdir / f"{uav}.log").read_text(errors="replace")[-4000:]
+                # The CLI's one-line error, not the INFO lines a daemon logs as it goes.
+                why = [ln for ln in tail.splitlines() if ln.startswith("aeroweaver:")]
+                out[uav] = f"exit {p.returncode}" + (f": {why[-1]}" if why else "")
         return out
 
     async def unless_one_fails(self, aw: Awaitable[T]) -> T:

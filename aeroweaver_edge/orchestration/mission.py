@@ -140,10 +140,13 @@ async def start_mission(
             hooks.on_plan(out["mission"])
         commander = Commander(mesh, opts.swarm, headers)
         waiting: dict[str, str] = {}  # uav -> what its ready report says it waits for
+        before: dict[str, dict[str, int]] = {}  # uav -> its refusals when it took the mission
 
         def heard(rep: ProgressReport) -> None:
-            if rep.phase == "ready" and rep.hold_reason:
-                waiting[rep.uav] = rep.hold_reason
+            if rep.phase == "ready":
+                before.setdefault(rep.uav, dict(rep.rejected))
+                if rep.hold_reason:
+                    waiting[rep.uav] = rep.hold_reason
             if hooks.on_report is not None:
                 hooks.on_report(rep)
 
@@ -226,7 +229,7 @@ async def start_mission(
                 for u, p in sorted(commander.board.uavs.items(), key=lambda kv: natural(kv[0]))
             }
             out.update(_contact_fields(contact, runner))
-            out["security"] = mission_security(mesh, world_mesh, commander.board, runner)
+            out["security"] = mission_security(mesh, world_mesh, commander.board, runner, before)
             await asyncio.sleep(0.2)  # let the ended context leave before the session closes
     out["wall_s"] = round(time.monotonic() - started, 3)
     return out

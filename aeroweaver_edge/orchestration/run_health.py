@@ -101,13 +101,35 @@ def security_fields(
 
 
 def mission_security(
-    cmdr_mesh: Mesh, world_mesh: Mesh, board: ProgressBoard, runner: WorldRunner | None
+    cmdr_mesh: Mesh,
+    world_mesh: Mesh,
+    board: ProgressBoard,
+    runner: WorldRunner | None,
+    before: dict[str, dict[str, int]] | None = None,
 ) -> dict[str, Any]:
     """``mission start``'s ``security`` object, shaped like a ``sim`` summary's: with a world
-    run here, exactly ``security_fields``; without one (field), what protected the
-    Commander's session and what the Commander and the daemons refused."""
-    if runner is not None:
-        return security_fields(world_mesh, cmdr_mesh, runner, board)
+    run here, ``security_fields``; without one (field), what protected the Commander's
+    session and what the Commander and the daemons refused. A service daemon's counters
+    run from its start: ``before`` (uav -> its counts when it took this mission, from its
+    ready report) is taken off, so the record holds this mission's refusals only."""
+    sec = (
+        security_fields(world_mesh, cmdr_mesh, runner, board)
+        if runner is not None
+        else _field_security(cmdr_mesh, board)
+    )
+    if before:
+        earlier: Counter[str] = Counter()
+        for counts in before.values():
+            earlier.update(counts)
+        daemons = Counter(sec["rejected_by_side"]["daemons"]) - earlier
+        total = Counter(sec["rejected"]) - earlier
+        sec["rejected_by_side"]["daemons"] = dict(daemons.most_common())
+        sec["rejected"] = dict(total.most_common())
+        sec["rejected_total"] = sum(total.values())
+    return sec
+
+
+def _field_security(cmdr_mesh: Mesh, board: ProgressBoard) -> dict[str, Any]:
     base = cmdr_mesh.security_summary()
     daemons: Counter[str] = Counter()
     for p in board.uavs.values():

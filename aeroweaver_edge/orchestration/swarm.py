@@ -346,6 +346,7 @@ async def run_swarm(
     on_commander: Callable[[Commander], None] | None = None,
     on_network: Callable[[RunNetwork], None] | None = None,
     on_started: Callable[[SwarmHandle], Awaitable[None]] | None = None,
+    on_plan: Callable[[MissionPlan], None] | None = None,
 ) -> RunSummary:
     started = time.monotonic()
     async with contextlib.AsyncExitStack() as stack:
@@ -375,6 +376,8 @@ async def run_swarm(
             )
         if opts.activation == "full":
             plan = with_full_catalogue(plan)
+        if on_plan is not None:  # the terminal shows who flies what before it flies
+            on_plan(plan)
         task = world_task(plan, opts.max_rounds)
         uavs = task.uav_ids
         summary = RunSummary(

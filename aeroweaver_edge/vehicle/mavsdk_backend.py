@@ -112,6 +112,7 @@ class MavsdkVehicle:
         self.in_air = False
         self.flight_mode = "UNKNOWN"
         self.connected = False
+        self._was_fresh = True  # telemetry fresh at the last check (logs link lost / up)
         self.home: Any = None
         self.glob: tuple[float, float, float] | None = None
         self.refused: str | None = None
@@ -344,7 +345,15 @@ class MavsdkVehicle:
     # -- the Vehicle port ---------------------------------------------------------------------
 
     def _fresh(self) -> bool:
-        return self.connected and time.monotonic() - self.pos_at <= self.cfg.link_timeout_s
+        fresh = self.connected and time.monotonic() - self.pos_at <= self.cfg.link_timeout_s
+        if self.connected and fresh != self._was_fresh:
+            self._was_fresh = fresh  # for the operator's log: link down / up, once each
+            if fresh:
+                log.warning("%s: MAVSDK telemetry back: link up", self.name)
+            else:
+                log.warning("%s: no MAVSDK telemetry for %.1f s: link lost", self.name,
+                            time.monotonic() - self.pos_at)  # fmt: skip
+        return fresh
 
     async def state(self) -> VehicleState:
         if self.pos is None:

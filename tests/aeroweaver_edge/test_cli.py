@@ -156,3 +156,20 @@ def test_a_size_the_task_does_not_take_exits_2_without_traceback(
     err = capsys.readouterr().err
     assert "private_communication needs exactly 2 UAVs (sender, receiver), got 5" in err
     assert "Traceback" not in err
+
+
+def test_verbosity_flags_work_after_any_subcommand(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``aeroweaver daemon --config X -v`` is no usage error: the config is read (and here
+    refused: it does not exist); a bad level is a usage error naming the choices."""
+    missing = str(tmp_path / "nope.toml")
+    assert main(["daemon", "--config", missing, "-v", "--log-level", "info"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot read" in err
+    assert "unrecognized arguments" not in err
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        main(["daemon", "--config", missing, "--log-level", "loud"])
+    assert exc.value.code == 2
+    assert "invalid choice: 'LOUD'" in capsys.readouterr().err

@@ -19,6 +19,7 @@ from aeroweaver_edge.config import (
     SimConfig,
     UavConfig,
 )
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
 from aeroweaver_edge.orchestration.swarm import mesh_configs
@@ -102,7 +103,11 @@ COVER = "Cover the three landmarks with three drones."
 async def test_no_daemon_up_is_one_clear_error() -> None:
     cmdr_cfg, _ = mesh_configs(f"ms-{uuid.uuid4().hex[:8]}", star=False)
     opts = MissionStartOptions(text=COVER, swarm="nobody", mesh=cmdr_cfg, roster_wait_s=0.3)
-    with pytest.raises(RuntimeError, match=r"no UAV daemon of swarm 'nobody' is up \(waited 0 s\)"):
+    with pytest.raises(
+        UserError,
+        match=r"^no UAV daemon of swarm 'nobody' answered within 0.3 s; "
+        r"start them",
+    ):
         await start_mission(opts)
 
 

@@ -225,3 +225,46 @@ async def test_settle_stops_at_a_later_perception_when_the_reward_was_lost(
         assert link.drain() == []
     finally:
         await link.aclose()
+
+
+async def test_a_new_world_starts_afresh_and_an_older_one_is_refused(
+    pair: tuple[World, SimLink],
+) -> None:
+    """A service daemon flies world after world: a perception with a newer header epoch is
+    a new world (its rounds start at 0 again, nothing of the old one is kept); a late one
+    of the older world is refused; ``next_world`` forgets the world after its shutdown."""
+    world, link = pair
+    assert link.waiting_for() == "waiting for a simulated world (sim backend)"
+    world.perceive(0)
+    world.perceive(1)
+    tick = await asyncio.wait_for(link.next_round(), 5)
+    assert tick is not None
+    assert (tick.episode, tick.round) == (0, 1)
+    assert link.waiting_for() is None
+    await link.finish(tick, sent=[])
+    old = world.headers
+    world.headers = HeaderFactory("world", epoch=old.epoch + 1)  # the next world's session
+    world.perceive(0)
+    tick = await asyncio.wait_for(link.next_round(), 5)  # no reward wait for the old round
+    assert tick is not None
+    assert (tick.episode, tick.round) == (0, 0)
+    assert link.worlds == 2
+    world.headers = old
+    world.perceive(5)  # the first world, late
+    assert await eventually(lambda: link.rejected["perception_old_world"] == 1)
+    world.headers = HeaderFactory("world", epoch=old.epoch + 1)
+    world.headers._seq = 100
+    world.mesh.put(
+        KEYS.sim_episode,
+        SimEpisode(h=world.headers.next(), episode=-1, task="coverage", phase="shutdown"),
+        block=True,
+    )
+    assert await asyncio.wait_for(link.next_round(), 5) is None
+    assert link.world_over
+    link.next_world()
+    link.end_world()  # nothing flies it: a no-op
+    assert link.waiting_for() is not None
+    world.perceive(0)  # the same epoch again is fine after next_world: a fresh start
+    tick = await asyncio.wait_for(link.next_round(), 5)
+    assert tick is not None
+    assert (tick.episode, tick.round) == (0, 0)
