@@ -224,6 +224,10 @@ class AgentConfig(_Section):
     # None: a new one at each daemon start, so runs never collide in a shared memory file.
     run_id: str | None = Field(default=None, min_length=1, max_length=64)
     share_experience: bool = True
+    # When a daemon shares: "episode" (its finalised records as an episode ends) or "round"
+    # (each record, with its round's reward, as it happens; the finalised ones still follow
+    # at the episode's end): peers retrieve it from their next round on (docs/adaptation.md).
+    share_every: Literal["episode", "round"] = "episode"
     max_labels: int = Field(default=26, ge=2, le=26)
     # Interaction history in the agent's context (paper §3.2): its own recent decisions and
     # rewards, in blocks of this many rounds so the prompt stays append-only. 0: none.

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.agent.history import InteractionHistory
+from aeroweaver_edge.agent.round_sharing import RoundSharing
 from aeroweaver_edge.agent.shared_intake import MAX_EPISODES, SharedIntake
 from aeroweaver_edge.approval import ApprovalGate
 from aeroweaver_edge.approval_link import ApprovalLink
@@ -183,6 +184,11 @@ class UavDaemon:
         gated = approve is None
         self.intake = SharedIntake(cfg.uav)  # same-role peers' records, stored per round
         self._shared: dict[int, int] = {}  # episode -> own records published
+        # share_every = "round": each record as it happens, and a queryable for late joiners
+        self.sharing: RoundSharing | None = None
+        if memory is not None and cfg.agent.share_experience and cfg.agent.share_every == "round":
+            self.sharing = RoundSharing(mesh, self.keys, cfg.uav, headers, self.intake)
+        self._joined = False  # this life has played a round (a later first round: fetch)
         # Flight phases (preflight, arm, take off, offboard, mission, land/return) wrap the
         # Vehicle port; the round flies through them. ``approve`` gates vehicle actions.
         self.phases = FlightPhases(
@@ -334,10 +340,12 @@ class UavDaemon:
             touched = {
                 rec.episode
                 for key, rec in (first, *sub.drain())
-                if self.intake.offer(key, rec, role) and rec.run == self._run
+                if self.intake.offer(key, rec, role) and rec.run == self._run and rec.final
             }
             for episode in sorted(touched):
                 self._tally(episode)
+            if self.sharing is not None:
+                self.sharing.arrived.set()
 
     @property
     def _run(self) -> str:
@@ -422,6 +430,8 @@ class UavDaemon:
             self._tasks.append(
                 asyncio.create_task(self._pump_experience(shared), name=f"{self.uav}-experience")
             )
+        if self.sharing is not None:
+            self.sharing.start()
         try:
             if self._peer_link is not None:
                 await self._peer_link.start()
@@ -433,6 +443,8 @@ class UavDaemon:
             while True:
                 tick = await self.ports.clock.next_round()
                 await self._absorb_rewards()
+                if tick is not None and self.sharing is not None:
+                    await self._take_round_experience(tick)
                 await self._store_shared()
                 if tick is None:
                     self._final_report()
@@ -452,6 +464,9 @@ class UavDaemon:
                 self._route(view)
                 sent_before = _llm_requests(self.rc.selector)
                 out = await run_round(self.rc, tick, view)
+                shares = self.sharing is not None and view is not None and out.chosen_by_agent
+                if shares and (will_share := getattr(self.ports.clock, "will_share", None)):
+                    will_share()  # lockstep: the world tells our same-role peers to wait for it
                 await self.ports.clock.finish(tick, sent=out.sent, guess=out.guess)
                 calls = _llm_requests(self.rc.selector) - sent_before
                 self._account(out, calls)
@@ -462,6 +477,8 @@ class UavDaemon:
                 self._report(out, view, calls)
                 await self._remember(out, view)
                 await self._settle(tick)
+                if shares:
+                    await self._share_round(out)
                 if self._on_round is not None:
                     await self._on_round(out)
         finally:
@@ -469,6 +486,8 @@ class UavDaemon:
             # returns if flying (vehicle.end_action), else holds. Never raises.
             await self.phases.finish("daemon stopping")
             await cancel_all(self._tasks)
+            if self.sharing is not None:
+                await self.sharing.aclose()
             if self._approval_link is not None:
                 await self._approval_link.aclose()
             if self._peer_link is not None:
@@ -666,14 +685,40 @@ class UavDaemon:
                 await self.memory.finalise(self.uav, ev.episode)
                 await self._share(ev.episode)
 
+    async def _take_round_experience(self, tick: RoundTick) -> None:
+        """share_every = "round": a late or restarted daemon first fetches its role's recent
+        experience from its peers' queryables; every round waits (bounded) for the records
+        the world says its same-role peers published last round (stored next, together)."""
+        view = self.mission.view()
+        if not self._joined and view is not None:
+            self._joined = True
+            if (tick.episode, tick.round) != (0, 0):
+                await self.sharing.fetch(view.role)  # type: ignore[union-attr]
+        if tick.experience_from and tick.round > 0:
+            await self.sharing.wait_for(  # type: ignore[union-attr]
+                self._run, tick.episode, tick.round - 1, tick.experience_from, tick.deadline_s
+            )
+
+    async def _share_round(self, out: RoundOutcome) -> None:
+        """Publish this round's own record, with its reward if it came (share_every=round)."""
+        if self.memory is None or self.sharing is None:
+            return
+        rec = await self.memory.get(self.uav, out.episode, out.round)
+        if rec is None or rec.origin:
+            return
+        wire = rec.to_wire(self.headers.next())
+        self.mesh.put(self.keys.experience(self.uav), wire, block=True)
+        self.sharing.published(wire)
+
     async def _share(self, episode: int) -> None:
         if self.memory is None or not self.cfg.agent.share_experience:
             return
         records = await self.memory.export_final(self.uav, episode)
         for rec in records:
-            self.mesh.put(
-                self.keys.experience(self.uav), rec.to_wire(self.headers.next()), block=True
-            )
+            wire = rec.to_wire(self.headers.next())
+            self.mesh.put(self.keys.experience(self.uav), wire, block=True)
+            if self.sharing is not None:
+                self.sharing.published(wire)
             self.stats.experience_shared += 1
         self._shared[episode] = len(records)
         while len(self._shared) > MAX_EPISODES:

@@ -46,6 +46,7 @@ class RoundTick:
     round: int
     deadline_s: float  # seconds this round may take before the UAV is treated as holding
     expect: tuple[MsgRef, ...] = ()  # lockstep: peer messages known to be on their way
+    experience_from: tuple[str, ...] = ()  # lockstep: peers whose last-round record comes
 
 
 class Clock(Protocol):

@@ -204,6 +204,18 @@ class ExperienceRecord(msgspec.Struct, frozen=True, kw_only=True, tag="exp"):
     run: str = ""  # the publisher's run identity: part of the deduplication key
 
 
+MAX_BATCH_RECORDS: Final = 64
+
+
+class ExperienceBatch(msgspec.Struct, frozen=True, kw_only=True, tag="exp_batch"):
+    """A daemon's recent own records, served on its experience key (a queryable), so a
+    daemon that restarts or joins late fetches its role's experience from its peers."""
+
+    h: Header
+    uav: str
+    records: Annotated[list[ExperienceRecord], msgspec.Meta(max_length=MAX_BATCH_RECORDS)] = []
+
+
 class Entity(msgspec.Struct, frozen=True, kw_only=True):
     id: str
     kind: str  # landmark / uav / evader / food / ...
@@ -238,6 +250,9 @@ class SimPerception(msgspec.Struct, frozen=True, kw_only=True, tag="perception")
     vel: Vec3
     entities: list[Entity] = []
     expected_inbox: list[MsgRef] = []  # lockstep: messages that reach this UAV, sent last round
+    # lockstep ([agent] share_every = "round"): same-role peers that publish their last
+    # round's experience record; the UAV stores them all before it decides
+    expected_experience: list[str] = []
     facts: Facts = {}
 
 
@@ -263,6 +278,7 @@ class SimCommand(msgspec.Struct, frozen=True, kw_only=True, tag="command"):
     held: bool = False
     sent: list[MsgRef] = []
     guess: Fact | None = None
+    shares: bool = False  # publishes this round's experience record once rewarded
 
 
 class SimEpisode(msgspec.Struct, frozen=True, kw_only=True, tag="episode"):

@@ -900,6 +900,40 @@ class ExperienceMemory:
                 group.final[i] = 1 if record.final else 0
         return True
 
+    def credit_peer(self, record: ExperienceRecord) -> int:
+        """A peer's in-flight record of round t (shared as it happened) carries r_t: credit
+        gamma^(t-s) * r_t to that peer's stored in-flight records s < t of the same
+        trajectory, as the peer credited its own (its finalised records replace these at
+        the episode's end). Call once per newly stored record. Returns records credited."""
+        r = record.reward
+        if record.final or r is None or not math.isfinite(r) or _invalid(record) is not None:
+            return 0
+        origin, t, g = record.h.sender or "?", record.round, self.gamma
+        where = (record.run, record.uav, record.episode, t, origin)
+
+        def go() -> list[tuple[int, str, str, int, float]]:
+            with self._tx():
+                rows = self._db.execute(
+                    "SELECT seq, task, role, round, ret FROM records WHERE run = ? AND uav = ? "
+                    "AND episode = ? AND round < ? AND origin = ? AND final = 0",
+                    where,
+                ).fetchall()
+                out = [(q, k, o, s, (ret or 0.0) + g ** (t - s) * r) for q, k, o, s, ret in rows]
+                self._db.executemany(
+                    "UPDATE records SET ret = ? WHERE seq = ?", [(u[4], u[0]) for u in out]
+                )
+                return out
+
+        nothing: list[tuple[int, str, str, int, float]] = []
+        done = self._guard("credit_peer", nothing, go, own=False)
+        for _, task, role, rnd, ret in done:
+            group = self._groups.get((task, role))
+            key = (record.run, record.uav, record.episode, rnd)
+            i = group.pos.get(key) if group is not None else None
+            if group is not None and i is not None:
+                group.ret[i] = ret
+        return len(done)
+
     def _sender_usage(self, origin: str) -> list[int]:
         """[records, bytes] stored of ``origin`` (peers only), counted once per open."""
         if self._usage is None:
@@ -1348,6 +1382,9 @@ class AsyncExperienceMemory:
 
     async def ingest(self, record: ExperienceRecord) -> bool:
         return await self._run(lambda: self._mem.ingest(record))
+
+    async def credit_peer(self, record: ExperienceRecord) -> int:
+        return await self._run(lambda: self._mem.credit_peer(record))
 
     async def warm(self, task: str, role: str) -> int:
         return await self._run(lambda: self._mem.warm(task, role))

@@ -8,6 +8,14 @@ is *taken* here when it arrives (checked, deduplicated, counted per run and epis
 canonical order (run, episode, uav, round). With the orchestration's barrier between
 episodes (``orchestration/barrier.py``, which waits for the taken counts) every run of a
 seed stores the same memory in the same order, whatever the process layout.
+
+Shared per round (``[agent] share_every = "round"``), a daemon also publishes each record as
+it happens, with its round's reward; the world tells each UAV which same-role peers publish
+one in a round (``SimPerception.expected_experience``), the daemon waits until they
+``arrived`` and stores them before its next decision: a record of round t is retrieved by
+every same-role peer from round t+1 on, whatever the process layout. Such an in-flight record
+also extends the returns of that peer's earlier in-flight records (``credit_peer``); only
+finalised records count as taken for the barrier between episodes.
 """
 
 from __future__ import annotations
@@ -49,18 +57,31 @@ class SharedIntake:
         self._pending: dict[RecordKey, ExperienceRecord] = {}
         self._per_sender: dict[str, int] = {}  # pending records by sender
         self._taken: OrderedDict[tuple[str, int], set[RecordKey]] = OrderedDict()
+        self._arrived: OrderedDict[RecordKey, None] = OrderedDict()  # authentic, any role
+        self._fetched: set[RecordKey] = set()  # pending records fetched from a queryable
         self.refused = 0  # not a peer's own record on its own key, or over the bound
         self.stored = 0
 
-    def offer(self, key: str, rec: ExperienceRecord, role: str | None) -> bool:
+    def offer(
+        self, key: str, rec: ExperienceRecord, role: str | None, *, fetched: bool = False
+    ) -> bool:
         """Take ``rec`` (published on ``key``) if it is a same-role peer's own record;
-        returns whether it counts as taken (new, or a newer version of one taken)."""
-        if role is None or rec.role != role or rec.uav == self.uav:
-            return False  # not for us (another role, no mission, our own echo)
+        returns whether it counts as taken (new, or a newer version of one taken).
+        ``fetched``: from a peer's queryable (its return is already extended; it credits
+        nothing and is not a round's expected record)."""
+        if rec.uav == self.uav:
+            return False  # our own echo
         if not rec.uav == rec.h.sender == key.split("/")[-2]:
             self.refused += 1  # a UAV shares only its own experience, on its own key
             return False
         k: RecordKey = (rec.run, rec.uav, rec.episode, rec.round)
+        if not rec.final and not fetched:
+            self._arrived[k] = None
+            self._arrived.move_to_end(k)
+            while len(self._arrived) > MAX_TAKEN:
+                self._arrived.popitem(last=False)
+        if role is None or rec.role != role:
+            return False  # not for us (another role, no mission)
         old = self._pending.get(k)
         if old is not None and _version(old) >= _version(rec):
             return False
@@ -73,6 +94,12 @@ class SharedIntake:
         if old is None:
             self._per_sender[rec.uav] = self._per_sender.get(rec.uav, 0) + 1
         self._pending[k] = rec
+        if fetched:
+            self._fetched.add(k)
+        else:
+            self._fetched.discard(k)
+        if not rec.final:
+            return True  # counted by the barrier once its finalised version comes
         seen = self._taken.setdefault((rec.run, rec.episode), set())
         self._taken.move_to_end((rec.run, rec.episode))
         while len(self._taken) > MAX_EPISODES:
@@ -81,8 +108,12 @@ class SharedIntake:
             seen.add(k)
         return True
 
+    def arrived(self, run: str, uav: str, episode: int, round: int) -> bool:
+        """Whether ``uav``'s in-flight record of that round has arrived (whatever its role)."""
+        return (run, uav, episode, round) in self._arrived
+
     def taken(self, run: str, episode: int) -> int:
-        """Distinct peers' records of ``run``'s ``episode`` taken so far."""
+        """Distinct peers' finalised records of ``run``'s ``episode`` taken so far."""
         return len(self._taken.get((run, episode), ()))
 
     @property
@@ -92,12 +123,16 @@ class SharedIntake:
     async def store(self, memory: AsyncExperienceMemory) -> int:
         """Store every pending record in canonical order; returns how many changed memory."""
         order = sorted(self._pending, key=lambda k: (k[0], k[2], k[1], k[3]))  # run, ep, uav, rnd
-        batch = [self._pending[k] for k in order]
+        batch = [(self._pending[k], k in self._fetched) for k in order]
         self._pending.clear()
         self._per_sender.clear()
+        self._fetched.clear()
         changed = 0
-        for rec in batch:
-            changed += await memory.ingest(rec)
+        for rec, fetched in batch:
+            if await memory.ingest(rec):
+                changed += 1
+                if not rec.final and not fetched:
+                    await memory.credit_peer(rec)
         self.stored += changed
         return changed
 

@@ -78,6 +78,7 @@ class SwarmOptions:
     gamma: float = d.GAMMA
     memory_dir: Path | None = None  # None: a fresh temporary directory per run
     share_experience: bool = True
+    share_every: Literal["episode", "round"] = "episode"  # AgentConfig.share_every
     deadline_s: float = d.DEADLINE_S
     mission_text: str | None = None
     top_k: int = d.TOP_K  # task skills activated per UAV by the Commander (plus hold_position)
@@ -511,6 +512,7 @@ async def run_swarm(
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
                     run_id=summary.run_id,
                     share_experience=opts.share_experience,
+                    share_every=opts.share_every,
                     history_rounds=opts.history_rounds,
                     state_context=opts.state_context,
                     coordination_reports=opts.coordination,

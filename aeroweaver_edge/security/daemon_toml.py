@@ -86,6 +86,7 @@ COMMENTS: dict[str, tuple[str, str]] = {
     "agent.memory_required": ("unusable memory: stop (true) or fly on in RAM (false)", ""),
     "agent.run_id": ("run identity on every record; unset: a new one per start", '"field-1"'),
     "agent.share_experience": ("publish this UAV's experience to its peers", ""),
+    "agent.share_every": ("share each record as it happens (round) or at episode end", ""),
     "agent.max_labels": ("most options offered per decision (2..26)", ""),
     "agent.history_rounds": ("own recent decisions in the prompt, in blocks (0: none)", ""),
     "agent.state_context": ("retrieval state holds peer messages and mission context", ""),

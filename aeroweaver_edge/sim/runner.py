@@ -242,6 +242,11 @@ class WorldRunner:
             and self.task.reaches(sender, b, world, self.comm_radius_m)
         ]
 
+    def _same_role(self, uav: str, sharers: list[str]) -> list[str]:
+        """The sharers whose experience ``uav`` takes: its role's, not itself."""
+        role = self.task.role_of(uav)
+        return [u for u in sharers if u != uav and self.task.role_of(u) == role]
+
     async def _hear(
         self, rnd: int, world: KinematicWorld, expect: dict[str, list[MsgRef]]
     ) -> dict[str, list[InboxMessage]]:
@@ -262,6 +267,7 @@ class WorldRunner:
         ep = Episode(self.task, world, self.cfg.max_rounds)
         self._publish_episode(episode, "start")
         expect: dict[str, list[MsgRef]] = defaultdict(list)
+        sharers: list[str] = []  # UAVs that publish last round's experience record
         controlled = self.task.uav_ids
         while not ep.done:
             round_started = time.monotonic()
@@ -293,6 +299,7 @@ class WorldRunner:
                         vel=body.vel,
                         entities=seen,
                         expected_inbox=expect.get(uav, []),
+                        expected_experience=self._same_role(uav, sharers),
                         facts=self.task.private_facts(world, uav),
                     ),
                     block=True,
@@ -302,6 +309,7 @@ class WorldRunner:
             self.stats.deadline_misses += len(missed)
             self.stats.commands += len(commands)
             expect = defaultdict(list)
+            sharers = sorted(u for u, c in commands.items() if c.shares)
             orders: dict[str, Vec3 | None] = {u: None for u in controlled}
             commanded = dict(orders)  # as the daemons sent them, before the world bounds them
             guesses: dict[str, str] = {}

@@ -83,6 +83,7 @@ class SimLink:
         self._last_played: tuple[int, int] | None = None
         self._setpoint: Vec3 = ZERO
         self._held = True
+        self._shares = False  # this round's experience record will be published
 
     def next_world(self) -> None:
         """A service daemon is done with this world (its shutdown, or it went away for
@@ -231,7 +232,16 @@ class SimLink:
             return None
         self._current = msg
         self._setpoint, self._held = ZERO, True
-        return RoundTick(msg.episode, msg.round, msg.deadline_s, tuple(msg.expected_inbox))
+        self._shares = False
+        return RoundTick(
+            msg.episode, msg.round, msg.deadline_s, tuple(msg.expected_inbox),
+            tuple(msg.expected_experience),
+        )  # fmt: skip
+
+    def will_share(self) -> None:
+        """This round's experience record will be published once rewarded: the command
+        says so, and the world tells the same-role peers to wait for it next round."""
+        self._shares = True
 
     async def finish(
         self, tick: RoundTick, *, sent: Sequence[MsgRef], guess: str | None = None
@@ -249,6 +259,7 @@ class SimLink:
                 held=self._held,
                 sent=list(sent),
                 guess=guess,
+                shares=self._shares,
             ),
             block=True,
         )
