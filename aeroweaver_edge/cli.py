@@ -110,6 +110,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         llm=llm,
         beta=args.beta,
         memory_dir=Path(args.memory_dir) if args.memory_dir else None,
+        share_every=args.share_experience,
         deadline_s=args.deadline,
         link=args.link,
         personality=args.personality,
@@ -588,6 +589,11 @@ def build_parser() -> argparse.ArgumentParser:
         "embedded server always does); the server needs one slot per UAV (-np)",
     )  # fmt: skip
     s.add_argument("--memory-dir", help="keep experience memory here (persists across runs)")
+    s.add_argument(
+        "--share-experience", choices=["episode", "round"], default="episode",
+        help="peers' experience arrives as each episode ends (episode) or from the next "
+        "round on ([agent] share_every; docs/adaptation.md)",
+    )  # fmt: skip
     s.add_argument(
         "--deadline",
         type=config_value(SimConfig, "deadline_s"),
