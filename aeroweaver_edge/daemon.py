@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.agent.history import InteractionHistory
-from aeroweaver_edge.agent.round_sharing import RoundSharing
+from aeroweaver_edge.agent.round_sharing import RoundSharing, wait_bound
 from aeroweaver_edge.agent.shared_intake import MAX_EPISODES, SharedIntake
 from aeroweaver_edge.approval import ApprovalGate
 from aeroweaver_edge.approval_link import ApprovalLink
@@ -187,7 +187,9 @@ class UavDaemon:
         # share_every = "round": each record as it happens, and a queryable for late joiners
         self.sharing: RoundSharing | None = None
         if memory is not None and cfg.agent.share_experience and cfg.agent.share_every == "round":
-            self.sharing = RoundSharing(mesh, self.keys, cfg.uav, headers, self.intake)
+            self.sharing = RoundSharing(
+                mesh, self.keys, cfg.uav, headers, self.intake, gamma=cfg.agent.gamma
+            )
         self._joined = False  # this life has played a round (a later first round: fetch)
         # Flight phases (preflight, arm, take off, offboard, mission, land/return) wrap the
         # Vehicle port; the round flies through them. ``approve`` gates vehicle actions.
@@ -689,15 +691,18 @@ class UavDaemon:
         """share_every = "round": a late or restarted daemon first fetches its role's recent
         experience from its peers' queryables; every round waits (bounded) for the records
         the world says its same-role peers published last round (stored next, together)."""
-        view = self.mission.view()
+        sharing, view = self.sharing, self.mission.view()
+        if sharing is None:
+            return
         if not self._joined and view is not None:
             self._joined = True
             if (tick.episode, tick.round) != (0, 0):
-                await self.sharing.fetch(view.role)  # type: ignore[union-attr]
+                await sharing.fetch(view.role)
         if tick.experience_from and tick.round > 0:
-            await self.sharing.wait_for(  # type: ignore[union-attr]
-                self._run, tick.episode, tick.round - 1, tick.experience_from, tick.deadline_s
-            )
+            await sharing.wait_for(
+                self._run, tick.episode, tick.round - 1, tick.experience_from,
+                wait_bound(tick.deadline_s),
+            )  # fmt: skip
 
     async def _share_round(self, out: RoundOutcome) -> None:
         """Publish this round's own record, with its reward if it came (share_every=round)."""

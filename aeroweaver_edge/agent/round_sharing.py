@@ -41,15 +41,30 @@ log = logging.getLogger(__name__)
 
 BATCH_BYTES = MAX_PAYLOAD_BYTES - 4096  # room for the batch's header and framing
 FETCH_TIMEOUT_S = 1.0
+WAIT_S = 2.0
+"""Longest wait at a round's start for the peers' records the world announced (at most a
+quarter of the round's deadline): they are published as the previous round's reward
+arrives, milliseconds before the round starts; a peer that died after its command costs
+this much of the round, counted and logged."""
+
+
+def wait_bound(deadline_s: float) -> float:
+    return min(WAIT_S, deadline_s / 4)
 
 
 class RoundSharing:
     """One daemon's side of per-round sharing: what it serves, what it waits for."""
 
     def __init__(
-        self, mesh: Mesh, keys: Keys, uav: str, headers: HeaderFactory, intake: SharedIntake
+        self,
+        mesh: Mesh,
+        keys: Keys,
+        uav: str,
+        headers: HeaderFactory,
+        intake: SharedIntake,
+        gamma: float = 0.95,
     ) -> None:
-        self.mesh, self.keys, self.uav = mesh, keys, uav
+        self.mesh, self.keys, self.uav, self.gamma = mesh, keys, uav, gamma
         self.headers = headers
         self.intake = intake
         self.arrived = asyncio.Event()  # set by the daemon's experience pump on every burst
@@ -70,8 +85,16 @@ class RoundSharing:
             self._queryable = None
 
     def published(self, rec: ExperienceRecord) -> None:
-        """Note an own record just published (in flight or finalised) for the queryable."""
+        """Note an own record just published (in flight or finalised) for the queryable.
+        An in-flight record's reward extends the served earlier records of its episode as
+        it extended them in memory, so a late joiner gets returns as they stand."""
         key = (rec.run, rec.episode, rec.round)
+        r = rec.reward
+        if not rec.final and r is not None:
+            for (run, episode, rnd), (old, n) in list(self._served.items()):
+                if (run, episode) == key[:2] and rnd < rec.round and not old.final:
+                    ret = (old.ret or 0.0) + self.gamma ** (rec.round - rnd) * r
+                    self._served[(run, episode, rnd)] = (msgspec.structs.replace(old, ret=ret), n)
         self._served.pop(key, None)
         self._served[key] = (rec, len(msgspec.msgpack.encode(rec)))
         while len(self._served) > MAX_BATCH_RECORDS:

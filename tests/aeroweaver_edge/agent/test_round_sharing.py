@@ -40,7 +40,15 @@ def stored(path: Path) -> list[StoredRecord]:
         mem.close()
 
 
-def play(mem: ExperienceMemory, uav: str, rounds: int, role: str = "searcher") -> None:
+def play(
+    mem: ExperienceMemory,
+    uav: str,
+    rounds: int,
+    role: str = "searcher",
+    sharing: RoundSharing | None = None,
+) -> None:
+    """``rounds`` decisions of ``uav``, each rewarded (and published to ``sharing``)."""
+    headers = HeaderFactory(uav)
     for t in range(rounds):
         mem.append(
             task="coverage", role=role, uav=uav, episode=0, round=t,
@@ -48,6 +56,8 @@ def play(mem: ExperienceMemory, uav: str, rounds: int, role: str = "searcher") -
             invocation="explore_local()",
         )  # fmt: skip
         mem.add_reward(uav, 0, t, 0.25 * t - 1.0, "sim")
+        if sharing is not None:
+            sharing.published(published(mem, uav, t, headers))
 
 
 def published(mem: ExperienceMemory, uav: str, t: int, headers: HeaderFactory) -> ExperienceRecord:
@@ -133,20 +143,19 @@ async def test_a_flooding_sender_is_bounded_in_the_intake_and_in_memory(tmp_path
 
 
 async def test_a_late_joiner_fetches_its_roles_records_from_peers_queryables(
-    zenoh_net: ZenohNet,
+    zenoh_net: ZenohNet, tmp_path: Path
 ) -> None:
     a, b, late = [await zenoh_net.open(n) for n in ("uav0", "uav2", "uav1")]
     keys = Keys("sim")
-    servers = {}
+    servers, mems = {}, {}
     for uav, mesh, role in (("uav0", a, "searcher"), ("uav2", b, "leader")):
         headers = HeaderFactory(uav)
-        sharing = RoundSharing(mesh, keys, uav, headers, SharedIntake(uav))
+        sharing = RoundSharing(mesh, keys, uav, headers, SharedIntake(uav), gamma=0.9)
         sharing.start()
         mem = own_memory()
-        play(mem, uav, 5, role)
-        for t in range(5):
-            sharing.published(published(mem, uav, t, headers))
+        play(mem, uav, 5, role, sharing)
         servers[uav] = sharing
+        mems[uav] = mem
     intake = SharedIntake("uav1")
     joiner = RoundSharing(late, keys, "uav1", HeaderFactory("uav1"), intake)
     taken = 0
@@ -158,6 +167,12 @@ async def test_a_late_joiner_fetches_its_roles_records_from_peers_queryables(
     assert taken == 5  # uav0's searcher records; uav2's leader records are not ours
     assert intake.pending == 5
     assert not intake.arrived(RUN, "uav0", 0, 4)  # fetched: not a round's expected record
+    # served with their returns as they stand in the sender's memory (not as first sent)
+    receiver = await AsyncExperienceMemory.open(tmp_path / "uav1.db", gamma=0.9, run=RUN)
+    await intake.store(receiver)
+    await receiver.aclose()
+    sender = [(r.round, r.ret) for r in mems["uav0"].records("coverage", "searcher")]
+    assert [(r.round, r.ret) for r in stored(tmp_path / "uav1.db")] == sender
     for s in servers.values():
         await s.aclose()
 
