@@ -12,7 +12,9 @@ from typing import Any, Literal
 
 import pytest
 
+from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
+from aeroweaver_edge.sim.runner import RoundLog
 
 TASK, SEED, EPISODES = "collection_delivery", 3, 2  # two roles of two collectors, two depots
 
@@ -99,3 +101,31 @@ async def test_round_sharing_gives_the_same_run_in_process_and_in_processes(
     mem_a, mem_b = memory_rows(tmp_path / "in-process"), memory_rows(tmp_path / "processes")
     assert mem_a == mem_b
     assert check_visible_next_round(mem_b) > 0
+
+
+async def test_a_restarted_daemon_that_lost_its_memory_fetches_its_roles_experience(
+    tmp_path: Path,
+) -> None:
+    """uav1 dies in round KILL_AT of episode 0 with its memory file gone; its new life
+    stores its peers' records of the earlier rounds before its own first decision, which
+    only the fetch from their queryables can give it (the episode-end export comes later)."""
+    kill_at, memory_dir = 8, tmp_path / "mem"
+
+    async def fault(log_: RoundLog, daemons: DaemonSet) -> None:
+        if (log_.episode, log_.round) == (0, kill_at):
+            await daemons.kill("uav1")
+            for path in memory_dir.glob("uav1.sqlite3*"):
+                path.unlink()
+            await daemons.restart("uav1")
+
+    opts = SwarmOptions(
+        task="coverage", seed=2, episodes=1, beta=0.8, selector="scripted",
+        memory_dir=memory_dir, deadline_s=10.0, share_every="round",
+    )  # fmt: skip
+    data = (await run_swarm(opts, fault=fault)).as_dict()
+    assert data["decode_errors"] == 0
+    mine = memory_rows(memory_dir)["uav1"]
+    first_own = min(i for i, r in enumerate(mine) if r[0] == "")
+    assert mine[first_own][4] > kill_at  # the new life's first decision
+    early = [r for r in mine[:first_own] if r[0] != "" and r[4] < kill_at]
+    assert {r[0] for r in early} == {"uav0", "uav2"}, mine[:first_own]
