@@ -23,6 +23,8 @@ from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
+import msgspec
+
 from aeroweaver_edge.agent.history import InteractionHistory
 from aeroweaver_edge.agent.round_sharing import RoundSharing, wait_bound
 from aeroweaver_edge.agent.shared_intake import MAX_EPISODES, SharedIntake
@@ -678,6 +680,8 @@ class UavDaemon:
     async def _absorb_rewards(self) -> None:
         for ev in self.ports.rewards.drain():
             self._last_reward = ev.reward
+            if self.sharing is not None and math.isfinite(ev.reward):
+                self.sharing.note_reward(ev.episode, ev.round, ev.reward)
             if self.rc.history is not None:
                 self.rc.history.record_reward(ev.episode, ev.round, ev.reward)
             if self.memory is None:
@@ -711,7 +715,8 @@ class UavDaemon:
         rec = await self.memory.get(self.uav, out.episode, out.round)
         if rec is None or rec.origin:
             return
-        wire = rec.to_wire(self.headers.next())
+        held = self.sharing.held_rewards(out.episode, out.round)
+        wire = msgspec.structs.replace(rec.to_wire(self.headers.next()), held_rewards=held)
         self.mesh.put(self.keys.experience(self.uav), wire, block=True)
         self.sharing.published(wire)
 

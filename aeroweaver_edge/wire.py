@@ -185,6 +185,9 @@ class Assignment(msgspec.Struct, frozen=True, kw_only=True, tag="assign"):
     revision: int = 0
 
 
+MAX_HELD_REWARDS: Final = 256
+
+
 class ExperienceRecord(msgspec.Struct, frozen=True, kw_only=True, tag="exp"):
     """One decision's experience; published so same-role daemons learn from each other."""
 
@@ -202,6 +205,10 @@ class ExperienceRecord(msgspec.Struct, frozen=True, kw_only=True, tag="exp"):
     final: bool = False
     reward_source: str = ""
     run: str = ""  # the publisher's run identity: part of the deduplication key
+    # Shared in flight (share_every = "round"): the rewards (round, r) of this trajectory's
+    # rounds since the publisher's previous record that have no record (it held), so the
+    # receiver extends the earlier records' returns as the publisher did.
+    held_rewards: Annotated[list[tuple[int, float]], msgspec.Meta(max_length=MAX_HELD_REWARDS)] = []
 
 
 MAX_BATCH_RECORDS: Final = 64

@@ -901,14 +901,19 @@ class ExperienceMemory:
         return True
 
     def credit_peer(self, record: ExperienceRecord) -> int:
-        """A peer's in-flight record of round t (shared as it happened) carries r_t: credit
-        gamma^(t-s) * r_t to that peer's stored in-flight records s < t of the same
-        trajectory, as the peer credited its own (its finalised records replace these at
-        the episode's end). Call once per newly stored record. Returns records credited."""
-        r = record.reward
-        if record.final or r is None or not math.isfinite(r) or _invalid(record) is not None:
+        """A peer's in-flight record of round t (shared as it happened) carries r_t and
+        the rewards of the rounds it held since its previous record: credit each
+        gamma^(u-s) * r_u, in round order, to that peer's stored in-flight records s < u of
+        the same trajectory, as the peer credited its own (its finalised records replace
+        these at the episode's end). Call once per newly stored record. Returns records
+        credited."""
+        t = record.round
+        rewards = sorted((u, r) for u, r in record.held_rewards if u < t and math.isfinite(r)) + (
+            [(t, record.reward)] if record.reward is not None else []
+        )
+        if record.final or not rewards or _invalid(record) is not None:
             return 0
-        origin, t, g = record.h.sender or "?", record.round, self.gamma
+        origin, g = record.h.sender or "?", self.gamma
         where = (record.run, record.uav, record.episode, t, origin)
 
         def go() -> list[tuple[int, str, str, int, float]]:
@@ -918,7 +923,13 @@ class ExperienceMemory:
                     "AND episode = ? AND round < ? AND origin = ? AND final = 0",
                     where,
                 ).fetchall()
-                out = [(q, k, o, s, (ret or 0.0) + g ** (t - s) * r) for q, k, o, s, ret in rows]
+                out = []
+                for q, k, o, s, ret in rows:
+                    for u, r in rewards:
+                        if s < u:
+                            ret = (ret or 0.0) + g ** (u - s) * r
+                    if ret is not None:  # s < t: credited at least r_t or a held reward
+                        out.append((q, k, o, s, ret))
                 self._db.executemany(
                     "UPDATE records SET ret = ? WHERE seq = ?", [(u[4], u[0]) for u in out]
                 )

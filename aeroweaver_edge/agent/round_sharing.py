@@ -18,7 +18,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from typing import TYPE_CHECKING
 
 import msgspec
@@ -27,6 +27,7 @@ from aeroweaver_edge.agent.shared_intake import SharedIntake
 from aeroweaver_edge.mesh import MeshError
 from aeroweaver_edge.wire import (
     MAX_BATCH_RECORDS,
+    MAX_HELD_REWARDS,
     MAX_PAYLOAD_BYTES,
     ExperienceBatch,
     ExperienceRecord,
@@ -73,6 +74,7 @@ class RoundSharing:
         )  # (run, episode, round) -> newest version, encoded size
         self._batch: ExperienceBatch | None = None
         self._queryable: Queryable | None = None
+        self._rewards: deque[tuple[int, int, float]] = deque(maxlen=MAX_HELD_REWARDS)
         self.wait_timeouts = 0  # rounds whose expected peers' records did not all arrive
         self.fetched = 0  # records taken from peers' queryables
 
@@ -84,17 +86,37 @@ class RoundSharing:
             await self._queryable.aclose()
             self._queryable = None
 
+    def note_reward(self, episode: int, round: int, reward: float) -> None:
+        """A reward of this daemon's: carried by its next published record if its round
+        has no record of its own (held)."""
+        self._rewards.append((episode, round, reward))
+
+    def held_rewards(self, episode: int, round: int) -> list[tuple[int, float]]:
+        """The rewards of ``episode``'s rounds before ``round`` not yet carried (the rounds
+        this daemon held since its previous record); forgets them and every older one."""
+        out = [(u, r) for e, u, r in self._rewards if e == episode and u < round]
+        kept = [(e, u, r) for e, u, r in self._rewards if (e, u) > (episode, round)]
+        self._rewards.clear()
+        self._rewards.extend(kept)
+        return out
+
     def published(self, rec: ExperienceRecord) -> None:
         """Note an own record just published (in flight or finalised) for the queryable.
         An in-flight record's reward extends the served earlier records of its episode as
         it extended them in memory, so a late joiner gets returns as they stand."""
         key = (rec.run, rec.episode, rec.round)
-        r = rec.reward
-        if not rec.final and r is not None:
+        rewards = sorted(rec.held_rewards) + (
+            [(rec.round, rec.reward)] if rec.reward is not None else []
+        )
+        if not rec.final and rewards:
             for (run, episode, rnd), (old, n) in list(self._served.items()):
-                if (run, episode) == key[:2] and rnd < rec.round and not old.final:
-                    ret = (old.ret or 0.0) + self.gamma ** (rec.round - rnd) * r
-                    self._served[(run, episode, rnd)] = (msgspec.structs.replace(old, ret=ret), n)
+                if (run, episode) != key[:2] or rnd >= rec.round or old.final:
+                    continue
+                ret = old.ret
+                for u, r in rewards:
+                    if rnd < u:
+                        ret = (ret or 0.0) + self.gamma ** (u - rnd) * r
+                self._served[(run, episode, rnd)] = (msgspec.structs.replace(old, ret=ret), n)
         self._served.pop(key, None)
         self._served[key] = (rec, len(msgspec.msgpack.encode(rec)))
         while len(self._served) > MAX_BATCH_RECORDS:

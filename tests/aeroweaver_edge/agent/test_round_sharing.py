@@ -69,39 +69,53 @@ def published(mem: ExperienceMemory, uav: str, t: int, headers: HeaderFactory) -
 async def test_in_flight_records_extend_the_senders_returns_exactly_as_it_does(
     tmp_path: Path,
 ) -> None:
+    """Rounds 2, 3 and 5 held (no record): their rewards ride on the next record."""
+    held = {2, 3, 5}
     sender = own_memory()
+    mesh: Any = None  # the sender's bookkeeping only
+    books = RoundSharing(mesh, KEYS, "uav0", HeaderFactory("uav0"), SharedIntake("uav0"), 0.9)
     receiver = await AsyncExperienceMemory.open(tmp_path / "uav1.db", gamma=0.9, run=RUN)
     intake = SharedIntake("uav1")
     headers = HeaderFactory("uav0")
-    for t in range(6):  # round t: the sender decides, is rewarded, publishes
-        play_one(sender, t)
-        assert intake.offer(
-            KEYS.experience("uav0"), published(sender, "uav0", t, headers), "searcher"
-        )
+    mine: list[tuple[int, float | None]] = []
+    for t in range(8):  # round t: the sender decides (or holds), is rewarded, publishes
+        play_one(sender, t, decide=t not in held)
+        books.note_reward(0, t, reward(t))
+        if t in held:
+            continue
+        wire = published(sender, "uav0", t, headers)
+        wire = msgspec.structs.replace(wire, held_rewards=books.held_rewards(0, t))
+        assert intake.offer(KEYS.experience("uav0"), wire, "searcher")
         assert intake.arrived(RUN, "uav0", 0, t)
         await intake.store(receiver)  # the receiver's round t+1 start
-    mine = [(r.round, r.ret) for r in sender.records("coverage", "searcher")]
-    theirs = [(r.round, r.ret) for r in stored(tmp_path / "uav1.db") if r.origin == "uav0"]
-    assert theirs == mine  # bit for bit, while in flight
+        mine = [(r.round, r.ret) for r in sender.records("coverage", "searcher")]
+        theirs = [(r.round, r.ret) for r in stored(tmp_path / "uav1.db") if r.origin == "uav0"]
+        assert theirs == mine  # bit for bit, while in flight
+    assert [r for r, _ in mine] == [0, 1, 4, 6, 7]
     assert all(not r.final for r in stored(tmp_path / "uav1.db"))
     # the finalised versions replace them and credit nothing more
     sender.finalise("uav0", 0)
     for rec in sender.export_final("uav0", 0):
         intake.offer(KEYS.experience("uav0"), rec.to_wire(headers.next()), "searcher")
-    assert intake.taken(RUN, 0) == 6  # only finalised records count for the barrier
+    assert intake.taken(RUN, 0) == 5  # only finalised records count for the barrier
     await intake.store(receiver)
     final = [(r.round, r.ret, r.final) for r in stored(tmp_path / "uav1.db")]
     assert final == [(t, ret, True) for t, ret in mine]
     await receiver.aclose()
 
 
-def play_one(mem: ExperienceMemory, t: int) -> None:
-    mem.append(
-        task="coverage", role="searcher", uav="uav0", episode=0, round=t,
-        state_text=f"task coverage role searcher landmark L{t % 3} near", skill="explore_local",
-        invocation="explore_local()",
-    )  # fmt: skip
-    mem.add_reward("uav0", 0, t, 0.25 * t - 1.0, "sim")
+def reward(t: int) -> float:
+    return 0.25 * t - 1.0
+
+
+def play_one(mem: ExperienceMemory, t: int, *, decide: bool = True) -> None:
+    if decide:
+        mem.append(
+            task="coverage", role="searcher", uav="uav0", episode=0, round=t,
+            state_text=f"task coverage role searcher landmark L{t % 3} near",
+            skill="explore_local", invocation="explore_local()",
+        )  # fmt: skip
+    mem.add_reward("uav0", 0, t, reward(t), "sim")
 
 
 async def test_a_flooding_sender_is_bounded_in_the_intake_and_in_memory(tmp_path: Path) -> None:
