@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.bench.report import aggregate, markdown
 from aeroweaver_edge.bench.runner import Cell, plan_cells
 from aeroweaver_edge.cli import main
@@ -45,18 +46,34 @@ def test_quick_run_writes_cells_tables_and_resumes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "bench"
-    assert quick(out) == 0
+    assert quick(out, "--jobs", "2") == 0
     err = capsys.readouterr().err
-    assert "3 cells, 0 already done, 3 to run" in err
+    assert "3 cells, 0 already done, 3 to run, 2 at a time" in err
     assert "ETA" in err
+    setup = json.loads((out / "setup" / "coverage.json").read_text())
+    assert setup["setup_tokens"] > 0  # the LLM Commander's parse + roles calls, measured
+    orders = {}
     for c in CONDS:
         data = json.loads((out / "runs" / "coverage" / c / "seed1.json").read_text())
         assert data["bench"]["complete"]
         assert data["bench"]["trace_check"] == []
         assert data["bench"]["llm_threads"] is None  # the fake provider: no embedded server
         assert data["bench"]["config"]["rounds"] == 2
-        assert (out / data["bench"]["trace"]).is_file()
+        assert data["bench"]["config"]["option_order"] == "seeded"
+        assert data["bench"]["setup_tokens"] == (setup["setup_tokens"] if c == "aeroweaver" else 0)
+        trace = out / data["bench"]["trace"]
+        assert trace.name == "seed1.trace.jsonl.gz"
+        assert trace.is_file()
+        assert not (out / "runs" / "coverage" / c / "seed1.trace.jsonl").exists()
         assert [e["rounds"] for e in data["episodes"]] == [2]
+        assert episode_metrics(read_trace(trace)) == data["episodes"]  # recomputable
+        head = read_trace(trace)[0]
+        assert head["option_order"] == "seeded"
+        orders[c] = head["mission"]["assignments"]["uav0"]["skills"]
+    # the skills AeroWeaver and Centralized share are listed in the same relative order
+    shared = [s for s in orders["centralized"] if s in orders["aeroweaver"]]
+    assert shared == [s for s in orders["aeroweaver"] if s in shared]
+    assert len(shared) >= 2
     rows = (out / "results.csv").read_text().splitlines()
     assert len(rows) == 1 + 3
     assert rows[0].startswith("task,condition,seed,episode,team_return")
@@ -68,6 +85,16 @@ def test_quick_run_writes_cells_tables_and_resumes(
     assert manifest["sessions"][0]["cells_run"] == 3
     assert manifest["sessions"][0]["load_start"]
     assert manifest["sessions"][0]["llm_threads"] is None
+    assert manifest["sessions"][0]["jobs"] == 2
+
+    # --report-only rebuilds every table and plot from the cells alone, byte for byte
+    outputs = ["table.md", "results.csv", "summary.json", "returns.png", "tokens.png"]
+    before = {name: (out / name).read_bytes() for name in outputs}
+    for name in outputs:
+        (out / name).unlink()
+    assert main(["bench", "run", "--tasks", "coverage", "--out", str(out), "--report-only"]) == 0
+    assert {name: (out / name).read_bytes() for name in outputs} == before
+    capsys.readouterr()
 
     # resume: nothing to run; a damaged cell is run again, the others are kept
     cell = out / "runs" / "coverage" / "centralized" / "seed1.json"
@@ -130,7 +157,8 @@ def test_tables_from_episode_figures() -> None:
     assert s.percentile(0.5) == 0.3
     assert s.uncached_per_call == 400 / 8
     md = markdown(stats, ["coverage"], ["aeroweaver", "hmas2", "no_activation"])
-    assert "| coverage | -12.00 ± 2.83 (n=2) | -20.00 (n=1) | -29.08 (n=1) |" in md
+    # mean [95 % bootstrap interval]: two episodes resample to means of -14, -12 or -10
+    assert "| coverage | -12.00 [-14.00, -10.00] (n=2) | -20.00 (n=1) | -29.08 (n=1) |" in md
     assert "| coverage | 0.20 | – |" in md  # tokens 200 / 1000; no centralized cell
     assert "| coverage | 0.000 |" in md  # Q = 1 + (-29.077 + 12) / 17.077 (the paper's K_t)
 
