@@ -56,9 +56,16 @@ async def measure_one(task: str, llm: LLMConfig) -> dict[str, Any]:
     except Exception as exc:  # a parse the Commander refuses is a finding, not a crash
         entry.update(setup_tokens=None, error=f"{type(exc).__name__}: {exc}"[:300])
     else:
+        # A parse call that failed at the endpoint (timeout, 5xx) reports no tokens and skips
+        # the roles call: no measurement, retried on resume. An answer the parser rejected
+        # still spent (and reported) its tokens: that is the cost of this model's setup.
+        measured = plan.parse_source == "llm" or plan.setup_tokens > 0
         entry.update(
-            setup_tokens=plan.setup_tokens,
-            error=None,
+            setup_tokens=plan.setup_tokens if measured else None,
+            error=None
+            if measured
+            else "the LLM Commander's parse call failed (no tokens reported): "
+            + ("; ".join(plan.notes) or "no reason given")[:300],
             parse_source=plan.parse_source,
             roles_source=plan.roles_source,
             assignments={u: list(a.skills) for u, a in sorted(plan.assignments.items())},

@@ -283,3 +283,25 @@ def test_an_endpoint_that_cannot_answer_is_named_before_any_cell(
     assert f"did not answer the start-up probe [{kind}]" in err
     assert chat_calls <= 4  # the probe (and its retries), never a cell's rounds
     assert not list(out.rglob("*.json"))
+
+
+@pytest.mark.parametrize(
+    ("jobs", "says"), [("0", "0 is out of range (1..256)"), ("two", "'two' is not a whole number")]
+)
+def test_a_bad_jobs_count_is_one_line(
+    jobs: str, says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["bench", "run", "--quick", "--jobs", jobs, "--out", str(tmp_path / "b")])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument --jobs: {says}" in err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "b").exists()
+
+
+def test_default_jobs_are_the_physical_cores_this_process_may_use() -> None:
+    from aeroweaver_edge.bench.runner import physical_cores
+    from aeroweaver_edge.llm.cpus import usable_cpus
+
+    assert 1 <= physical_cores() <= usable_cpus()
