@@ -219,9 +219,15 @@ async def run_cell(
         )
         # holds only: no result; option letters in the seeded order every condition shares
         opts = dataclasses.replace(opts, require_llm_answer=True, option_order=OPTION_ORDER)
-        summary = (await run_swarm(opts)).as_dict()
+        try:
+            summary = (await run_swarm(opts)).as_dict()
+        except asyncio.CancelledError:
+            trace.unlink(missing_ok=True)  # half a cell is no result: a resume reruns it
+            raise
     wall = time.monotonic() - started
-    episodes = episode_metrics(read_trace(trace))
+    episodes = episode_metrics(await asyncio.to_thread(read_trace, trace))
+    # off the loop (other cells' daemons share it); a stop now leaves at most a .gz without
+    # its JSON, which no report reads and a resume overwrites
     trace = await asyncio.to_thread(archive_trace, trace)
     unusable = llm_failure_problem(episodes)
     data = {
@@ -382,16 +388,16 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
             file=sys.stderr,
             flush=True,
         )
-        ran = 0
+        ran: list[Cell] = []  # filled as cells finish: an interrupted session counts them too
         try:
             if any(c.condition in SETUP_CONDITIONS for c in cells) and source != "scripted":
                 await measure_setups(out, sorted({c.task for c in cells}), llm, source)
-            ran = await _run_cells(args, todo, llm, key, jobs, progress, failures)
+            await _run_cells(args, todo, llm, key, jobs, progress, failures, ran)
         finally:
             session.update(
                 finished=datetime.now(UTC).isoformat(timespec="seconds"),
                 load_end=_load(),
-                cells_run=ran,
+                cells_run=len(ran),
                 failures=failures,
             )
             _record_session(out, session)
@@ -418,24 +424,25 @@ async def _run_cells(
     jobs: int,
     progress: Progress,
     failures: list[str],
-) -> int:
+    ran: list[Cell],
+) -> None:
     """``todo`` with up to ``jobs`` cells running at once: a worker takes the next cell as
-    soon as its last one ends, so no core waits for the slowest cell of a batch. Returns how
-    many cells ran to a result. Two unusable cells in a row (in finishing order) stop all."""
+    soon as its last one ends, so no core waits for the slowest cell of a batch. Cells that
+    ran to a result are appended to ``ran``. Two unusable cells in a row (in finishing
+    order) stop all."""
     queue = list(todo)
-    ran = 0
     unusable_in_a_row = 0
     stop: BaseException | None = None
 
     async def worker() -> None:
-        nonlocal ran, unusable_in_a_row, stop
+        nonlocal unusable_in_a_row, stop
         while queue and stop is None:
             cell = queue.pop(0)
             t0 = time.monotonic()
             try:
                 data = await run_cell(cell, args, llm, key)
                 outcome = _outcome(data)
-                ran += 1
+                ran.append(cell)
                 unusable_in_a_row = 0
             except (asyncio.CancelledError, KeyboardInterrupt):
                 raise
@@ -466,7 +473,6 @@ async def _run_cells(
         await asyncio.gather(*workers, return_exceptions=True)
     if stop is not None:
         raise stop
-    return ran
 
 
 async def preflight(llm: LLMConfig) -> None:

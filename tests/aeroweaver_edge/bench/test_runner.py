@@ -305,3 +305,39 @@ def test_default_jobs_are_the_physical_cores_this_process_may_use() -> None:
     from aeroweaver_edge.llm.cpus import usable_cpus
 
     assert 1 <= physical_cores() <= usable_cpus()
+
+
+def test_a_stopped_run_records_the_cells_it_finished_and_resumes(tmp_path: Path) -> None:
+    """SIGTERM mid-run: the session in manifest.json counts the cells that finished (also
+    with two running at once), and the same command runs only the rest."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "bench"
+    argv = [sys.executable, "-m", "aeroweaver_edge.cli", "bench", "run", "--quick"]
+    argv += ["--tasks", "coverage", "line_formation", "--jobs", "2", "--out", str(out)]
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    try:
+        deadline = time.monotonic() + 240
+        while not list(out.glob("runs/*/*/seed1.json")) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        assert proc.stderr is not None
+        proc.stderr.close()
+    assert proc.returncode != 0
+    done = [
+        p for p in out.glob("runs/*/*/seed1.json") if json.loads(p.read_text())["bench"]["complete"]
+    ]
+    assert done
+    session = json.loads((out / "manifest.json").read_text())["sessions"][-1]
+    assert session["cells_run"] == len(done)
+    assert session["jobs"] == 2
+    assert not list(out.glob("runs/*/*/*.trace.jsonl"))  # every kept trace is archived
