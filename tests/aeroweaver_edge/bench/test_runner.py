@@ -67,8 +67,16 @@ def test_quick_run_writes_cells_tables_and_resumes(
         assert not (out / "runs" / "coverage" / c / "seed1.trace.jsonl").exists()
         assert [e["rounds"] for e in data["episodes"]] == [2]
         assert episode_metrics(read_trace(trace)) == data["episodes"]  # recomputable
-        head = read_trace(trace)[0]
+        lines = read_trace(trace)
+        head = lines[0]
         assert head["option_order"] == "seeded"
+        for row in lines:  # each pick is the option its letter names in the recorded order
+            for uav, d in row.get("decisions", {}).items():
+                if d.get("label") is not None and d.get("options"):
+                    assert f"{d['label']}. {d['invocation']}" in d["options"]
+                    skills = head["mission"]["assignments"][uav]["skills"]
+                    listed = [o.split(". ", 1)[1].split("(")[0] for o in d["options"]]
+                    assert listed == sorted(listed, key=skills.index)  # the plan's order
         orders[c] = head["mission"]["assignments"]["uav0"]["skills"]
     # the skills AeroWeaver and Centralized share are listed in the same relative order
     shared = [s for s in orders["centralized"] if s in orders["aeroweaver"]]
