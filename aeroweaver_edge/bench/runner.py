@@ -205,30 +205,32 @@ async def run_cell(
     trace.parent.mkdir(parents=True, exist_ok=True)
     load_before = _load()
     started = time.monotonic()
-    with tempfile.TemporaryDirectory(prefix="aw-bench-mem-") as mem:
-        opts = swarm_options(
-            cond,
-            task=cell.task,
-            seed=cell.seed,
-            episodes=args.episodes,
-            rounds=args.rounds,
-            llm=llm,
-            deadline_s=args.deadline,
-            trace_path=trace,
-            memory_dir=Path(mem),
-        )
-        # holds only: no result; option letters in the seeded order every condition shares
-        opts = dataclasses.replace(opts, require_llm_answer=True, option_order=OPTION_ORDER)
-        try:
+    plain = trace
+    try:
+        with tempfile.TemporaryDirectory(prefix="aw-bench-mem-") as mem:
+            opts = swarm_options(
+                cond,
+                task=cell.task,
+                seed=cell.seed,
+                episodes=args.episodes,
+                rounds=args.rounds,
+                llm=llm,
+                deadline_s=args.deadline,
+                trace_path=trace,
+                memory_dir=Path(mem),
+            )
+            # holds only: no result; option letters in the seeded order all conditions share
+            opts = dataclasses.replace(opts, require_llm_answer=True, option_order=OPTION_ORDER)
             summary = (await run_swarm(opts)).as_dict()
-        except asyncio.CancelledError:
-            trace.unlink(missing_ok=True)  # half a cell is no result: a resume reruns it
-            raise
-    wall = time.monotonic() - started
-    episodes = episode_metrics(await asyncio.to_thread(read_trace, trace))
-    # off the loop (other cells' daemons share it); a stop now leaves at most a .gz without
-    # its JSON, which no report reads and a resume overwrites
-    trace = await asyncio.to_thread(archive_trace, trace)
+        wall = time.monotonic() - started
+        # off the loop: other cells' daemons share it
+        episodes = episode_metrics(await asyncio.to_thread(read_trace, trace))
+        trace = await asyncio.to_thread(archive_trace, trace)
+    except asyncio.CancelledError:
+        # half a cell is no result: its plain trace goes, a resume reruns it (a .gz that a
+        # stop left without its JSON is read by no report and overwritten by the rerun)
+        plain.unlink(missing_ok=True)
+        raise
     unusable = llm_failure_problem(episodes)
     data = {
         "bench": {
@@ -286,7 +288,7 @@ def archive_trace(path: Path) -> Path:
     ):
         z.write(src.read())
     tmp.replace(gz)
-    path.unlink()
+    path.unlink(missing_ok=True)  # a stopped cell may have removed it meanwhile
     return gz
 
 

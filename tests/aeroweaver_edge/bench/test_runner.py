@@ -315,7 +315,9 @@ def test_default_jobs_are_the_physical_cores_this_process_may_use() -> None:
     assert 1 <= physical_cores() <= usable_cpus()
 
 
-def test_a_stopped_run_records_the_cells_it_finished_and_resumes(tmp_path: Path) -> None:
+def test_a_stopped_run_records_the_cells_it_finished_and_resumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """SIGTERM mid-run: the session in manifest.json counts the cells that finished (also
     with two running at once), and the same command runs only the rest."""
     import os
@@ -349,3 +351,7 @@ def test_a_stopped_run_records_the_cells_it_finished_and_resumes(tmp_path: Path)
     assert session["cells_run"] == len(done)
     assert session["jobs"] == 2
     assert not list(out.glob("runs/*/*/*.trace.jsonl"))  # every kept trace is archived
+    # the same command runs only the rest
+    assert main(argv[3:]) == 0
+    err = capsys.readouterr().err
+    assert f"14 cells, {len(done)} already done, {14 - len(done)} to run" in err
