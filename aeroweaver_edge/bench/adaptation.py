@@ -56,6 +56,7 @@ from aeroweaver_edge.agent.estimators import ENV_ESTIMATOR, Estimator
 from aeroweaver_edge.agent.scripted import ENV_BASE, Base
 from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.bench.paired_stats import paired_summary
+from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
@@ -581,7 +582,7 @@ def main_paired(args: argparse.Namespace, llm: LLMConfig) -> int:
 
 
 def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
-    p = argparse.ArgumentParser(prog=prog or "python -m aeroweaver_edge.bench.adaptation")
+    p = ArgumentParser(prog=prog or "python -m aeroweaver_edge.bench.adaptation")
     p.add_argument(
         "--tasks",
         nargs="+",
