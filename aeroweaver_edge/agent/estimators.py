@@ -11,6 +11,12 @@ docs/adaptation.md).
 ``G^H_t = sum_{u=t}^{t+H-1} gamma^(u-t) r_u``, and a record is eligible once H rewards at or
 after its round are known, or its trajectory ended (then with the rewards it has, if any).
 
+``centre`` (with a horizon: ``horizon:3,centre``) is against time confounding under team
+rewards: a record's value is its H-step return minus the mean H-step return of every
+eligible record of the role at the same round (this memory's whole group, all bodies and
+episodes), so "late in the episode, when the team was already close" no longer looks like
+a good skill.
+
 ``support:M`` (a remedy of this project, combinable: ``horizon:3,support:4``) is against
 thin evidence: a skill with fewer than M eligible records in the neighbourhood gets no
 promotion -- its A is the lowest advantage of the supported skills (0 if none is
@@ -39,7 +45,10 @@ ENV_ESTIMATOR: Final = "AEROWEAVER_ESTIMATOR"
 Traj = tuple[str, str, int]  # (run, uav, episode)
 RunKey = tuple[str, str, int, int]  # (run, uav, episode, round)
 
-_USAGE = "expected paper, horizon:H or support:M, or a comma-joined mix (horizon:3,support:4)"
+_USAGE = (
+    "expected paper, horizon:H, support:M or centre (with a horizon), or a comma-joined mix "
+    "(horizon:3,support:4)"
+)
 
 
 @dataclass(frozen=True)
@@ -48,17 +57,20 @@ class Estimator:
 
     horizon: int | None = None  # None: the paper's return G_t
     support: int = 1  # fewest eligible records for a skill's own advantage
+    centre: bool = False  # subtract the per-round mean H-step return of the group
 
     @property
     def name(self) -> str:
         parts = [] if self.horizon is None else [f"horizon:{self.horizon}"]
+        if self.centre:
+            parts.append("centre")
         if self.support > 1:
             parts.append(f"support:{self.support}")
         return ",".join(parts) or "paper"
 
     @property
     def is_paper(self) -> bool:
-        return self.horizon is None and self.support == 1
+        return self.horizon is None and self.support == 1 and not self.centre
 
     @classmethod
     def parse(cls, text: str) -> Estimator:
@@ -66,12 +78,16 @@ class Estimator:
         with one line naming the problem otherwise."""
         horizon: int | None = None
         support = 1
+        centre = False
         parts = [p.strip() for p in text.split(",")]
         if not text.strip() or any(not p for p in parts):
             raise ValueError(f"estimator {text!r}: {_USAGE}")
         for part in parts:
             kind, _, arg = part.partition(":")
             if kind == "paper" and not arg:
+                continue
+            if kind == "centre" and not arg:
+                centre = True
                 continue
             if kind not in ("horizon", "support"):
                 raise ValueError(f"estimator {text!r}: unknown part {part!r}; {_USAGE}")
@@ -85,11 +101,15 @@ class Estimator:
                 horizon = n
             else:
                 support = n
-        return cls(horizon, support)
+        if centre and horizon is None:
+            raise ValueError(f"estimator {text!r}: centre needs a horizon (horizon:3,centre)")
+        return cls(horizon, support, centre)
 
     def book(self, gamma: float) -> HorizonBook | None:
         """The per-group bookkeeping this estimator needs (``None``: the stored return)."""
-        return None if self.horizon is None else HorizonBook(self.horizon, gamma)
+        if self.horizon is None:
+            return None
+        return HorizonBook(self.horizon, gamma, centre=self.centre)
 
     def advantages(
         self,
@@ -135,11 +155,12 @@ class HorizonBook:
     the group's order; ``reward`` for every reward of a trajectory with records here (a
     changed value replaces the old one, as ``add_reward`` does)."""
 
-    __slots__ = ("count", "gamma", "h", "hret", "members", "rewards", "rounds")
+    __slots__ = ("centre", "count", "gamma", "h", "hret", "members", "rewards", "rounds")
 
-    def __init__(self, h: int, gamma: float) -> None:
+    def __init__(self, h: int, gamma: float, *, centre: bool = False) -> None:
         self.h = h
         self.gamma = gamma
+        self.centre = centre
         self.rewards: dict[Traj, dict[int, float]] = {}
         self.members: dict[Traj, list[int]] = {}
         self.rounds = array("i")
@@ -187,6 +208,20 @@ class HorizonBook:
 
     def value(self, i: int) -> float:
         return self.hret[i]
+
+    def values(self, positions: Sequence[int], final: array[int]) -> list[float]:
+        """The values of ``positions`` (eligible ones): H-step returns, centred per round
+        over the group's eligible records when ``centre``."""
+        if not self.centre:
+            return [self.hret[i] for i in positions]
+        import numpy as np
+
+        count = np.frombuffer(self.count, dtype=np.int32)
+        ok = (count >= self.h) | ((np.frombuffer(final, dtype=np.int8) != 0) & (count > 0))
+        rounds = np.frombuffer(self.rounds, dtype=np.int32)[ok]
+        sums = np.bincount(rounds, weights=np.frombuffer(self.hret, dtype=np.float64)[ok])
+        ns = np.bincount(rounds)
+        return [self.hret[i] - float(sums[self.rounds[i]] / ns[self.rounds[i]]) for i in positions]
 
 
 __all__ = [

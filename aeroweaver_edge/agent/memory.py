@@ -906,9 +906,11 @@ class ExperienceMemory:
         return not math.isnan(group.ret[i]) and (not self.finalised_only or group.final[i] != 0)
 
     @staticmethod
-    def _value(group: _Group, i: int) -> float:
-        """A record's value for the estimator: its return, or its H-step return."""
-        return group.ret[i] if group.book is None else group.book.value(i)
+    def _values(group: _Group, pos: list[int]) -> list[float]:
+        """The records' values for the estimator: returns, or the book's (agent.estimators)."""
+        if group.book is None:
+            return [group.ret[i] for i in pos]
+        return group.book.values(pos, group.final)
 
     def _select_python(
         self, group: _Group, tokens: frozenset[str]
@@ -995,12 +997,12 @@ class ExperienceMemory:
             Neighbour(
                 group.keys[i][1:],
                 group.skills[group.skill[i]],
-                self._value(group, i),
+                v,
                 s,
                 group.seq[i],
                 group.keys[i][0],
             )
-            for i, s in zip(pos, sim, strict=True)
+            for i, s, v in zip(pos, sim, self._values(group, pos), strict=True)
         ]
 
     def advantages(
@@ -1018,7 +1020,7 @@ class ExperienceMemory:
         if not pos:
             return dict.fromkeys(names, 0.0)
         return self.estimator.advantages(
-            [self._value(group, i) for i in pos],
+            self._values(group, pos),
             [group.skill[i] for i in pos],
             {name: group.skill_ids.get(skill_of(name), -1) for name in names},
         )

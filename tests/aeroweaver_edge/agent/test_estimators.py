@@ -237,3 +237,24 @@ def test_unknown_record_reward_for_peer_update(tmp_path: Path) -> None:
     m.ingest(ExperienceRecord(h=Header(sender="u9", epoch=1, seq=2, stamp=0.0), **final))  # type: ignore[arg-type]
     assert [n.ret for n in m.neighbourhood_of(T, R, "landmark l1")] == [-2.0]
     m.close()
+
+
+def test_centre_subtracts_the_per_round_mean_of_the_group(tmp_path: Path) -> None:
+    est = Estimator.parse("horizon:2,centre")
+    assert est.name == "horizon:2,centre"
+    with pytest.raises(ValueError, match="centre needs a horizon"):
+        Estimator.parse("centre")
+    m = ExperienceMemory(tmp_path / "m.sqlite", gamma=GAMMA, neighbourhood=10_000, estimator=est)
+    fill(m, random.Random(4), episodes=3, rounds=8)
+    expect = recomputed(m, 2)
+    by_round: dict[int, list[float]] = {}
+    for (_, _, rnd), v in expect.items():
+        if v is not None:
+            by_round.setdefault(rnd, []).append(v)
+    got = {n.key: n.ret for n in m.neighbourhood_of(T, R, "landmark l1 near 2")}
+    assert got
+    for key, v in got.items():
+        want = expect[key]
+        assert want is not None
+        assert v == pytest.approx(want - sum(by_round[key[2]]) / len(by_round[key[2]]), abs=1e-12)
+    m.close()
