@@ -26,8 +26,8 @@ equal count sequences, ``p_wilcoxon`` the two-sided signed-rank test over the pe
 differences (``bench.paired_stats``). One cell per (base, task, sequence, beta[,
 estimator]) under ``DIR/runs/``, skipped when done (resumable; the beta = 0 cells do not
 depend on the estimator and are shared); a progress line per cell; a learning-curve PNG
-per task (mean return by episode index with a 95 % band) in ``DIR/curves/``. ``--base`` is
-a scripted base (``agent.scripted``: reference, hold-biased, position-biased, noisy[:SD])
+per task (mean return by episode index with a 95 % band) in
+``DIR/curves/<base>/<estimator>/``. ``--base`` is a scripted base (``agent.scripted``: reference, hold-biased, position-biased, noisy[:SD])
 or ``llm`` (the ``--llm`` endpoint, default the embedded model); ``--estimator`` one of
 ``agent.estimators`` (paper, horizon:H, support:M, mixed with commas).
 """
@@ -564,7 +564,8 @@ def main_paired(args: argparse.Namespace, llm: LLMConfig) -> int:
         if (c := _load(_cell_dir(Path(args.out), args.base, t, s, b, args.estimator)
                        / "result.json")) is not None
     }  # fmt: skip
-    pngs = curves(args, cells, Path(args.out) / "curves" / f"{args.estimator.replace(':', '')}")
+    where = Path(args.out) / "curves" / args.base.replace(":", "") / args.estimator.replace(":", "")
+    pngs = curves(args, cells, where)
     data["curves"] = [str(p) for p in pngs]
     write_json_file(json_path, data)
     for task, t in data["tasks"].items():
