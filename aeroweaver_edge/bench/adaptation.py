@@ -27,9 +27,10 @@ differences (``bench.paired_stats``). One cell per (base, task, sequence, beta[,
 estimator]) under ``DIR/runs/``, skipped when done (resumable; the beta = 0 cells do not
 depend on the estimator and are shared); a progress line per cell; a learning-curve PNG
 per task (mean return by episode index with a 95 % band) in
-``DIR/curves/<base>/<estimator>/``. ``--base`` is a scripted base (``agent.scripted``: reference, hold-biased, position-biased, noisy[:SD])
-or ``llm`` (the ``--llm`` endpoint, default the embedded model); ``--estimator`` one of
-``agent.estimators`` (paper, horizon:H, support:M, mixed with commas).
+``DIR/curves/<base>/<estimator>/``. ``--base`` is a scripted base (``agent.scripted``:
+reference, hold-biased, position-biased, noisy[:SD]) or ``llm`` (the ``--llm`` endpoint,
+default the embedded model); ``--estimator`` one of ``agent.estimators`` (paper,
+horizon:H, support:M, centre, mixed with commas).
 """
 
 from __future__ import annotations
