@@ -716,17 +716,18 @@ def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     given = list(sys.argv[1:] if argv is None else argv)
-    if given[:2] == ["bench", "adaptation"]:  # its own parser (docs/adaptation.md)
+    verbose = bool(given) and given[0] in ("-v", "--verbose")
+    if given[verbose : verbose + 2] == ["bench", "adaptation"]:  # its own parser
         from aeroweaver_edge.bench import adaptation
 
-        logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
+        logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING)
         try:
-            return adaptation.main(given[2:], prog="aeroweaver bench adaptation")
+            return adaptation.main(given[verbose + 2 :], prog="aeroweaver bench adaptation")
         except (KeyboardInterrupt, asyncio.CancelledError):
             print("aeroweaver: bench stopped; rerun the same command to resume", file=sys.stderr)
             return 130
         except Exception as exc:
-            return report(exc, verbose=False)
+            return report(exc, verbose=verbose)
     bench_run = _bench_run_args(sys.argv[1:] if argv is None else argv)
     if bench_run is not None:
         from aeroweaver_edge.bench import runner
