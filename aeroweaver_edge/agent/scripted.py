@@ -12,7 +12,9 @@ Degraded bases (issue 24: the correction exists to fix a weak base, so it must b
 one): ``hold-biased`` adds ``HOLD_BIAS`` to ``hold_position``; ``position-biased`` shuffles
 the options with a seeded permutation per decision and adds ``POSITION_BIAS`` to the one
 shown first (what a small LLM answering ``A`` does when the order changes every round);
-``noisy[:SD]`` adds seeded Gaussian noise (default SD ``NOISE_SD``) to every utility. The
+``noisy[:SD]`` adds seeded Gaussian noise (default SD ``NOISE_SD``) to every utility; any
+base with ``@T`` divides the utilities by T before the log-softmax (same argmax, gaps T
+times smaller: room for the correction to act). The
 randomness is a function of (task, UAV, episode, round, own position) only, so in-process and
 ``--processes`` runs agree and paired runs (beta = 0 against beta > 0) see the same noise
 in the same state.
@@ -92,6 +94,16 @@ BASES: Final = ("reference", "hold-biased", "position-biased", "noisy")
 ENV_BASE: Final = "AEROWEAVER_SCRIPTED_BASE"
 
 
+def _positive(value: str, text: str, what: str) -> float:
+    try:
+        x = float(value)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and x > 0):
+        raise ValueError(f"scripted base {text!r}: {what} must be a positive number")
+    return x
+
+
 @dataclass(frozen=True)
 class Base:
     """A scripted base: the reference policy, optionally degraded (module docstring)."""
@@ -99,32 +111,29 @@ class Base:
     kind: str = "reference"
     sd: float = NOISE_SD
     seed: int = 0
+    temperature: float = 1.0  # log-softmax temperature: > 1 leaves the same argmax, less sure
 
     @property
     def name(self) -> str:
+        name = self.kind
         if self.kind == "noisy" and self.sd != NOISE_SD:
-            return f"noisy:{self.sd:g}"
-        return self.kind
+            name = f"noisy:{self.sd:g}"
+        return name if self.temperature == 1.0 else f"{name}@{self.temperature:g}"
 
     @classmethod
     def parse(cls, text: str) -> Base:
-        """``reference``, ``hold-biased``, ``position-biased`` or ``noisy[:SD]``;
-        ``ValueError`` naming the choices otherwise."""
-        kind, _, arg = text.strip().partition(":")
-        if kind not in BASES or (arg and kind != "noisy"):
+        """``reference``, ``hold-biased``, ``position-biased`` or ``noisy[:SD]``, each
+        optionally ``@T`` (temperature T > 0); ``ValueError`` naming the choices otherwise."""
+        body, at, temp = text.strip().partition("@")
+        kind, colon, arg = body.partition(":")
+        if kind not in BASES or (colon and (kind != "noisy" or not arg)):
             raise ValueError(
                 f"unknown scripted base {text!r}: expected one of reference, hold-biased, "
-                "position-biased, noisy[:SD]"
+                "position-biased, noisy[:SD], optionally @TEMPERATURE"
             )
-        if not arg:
-            return cls(kind)
-        try:
-            sd = float(arg)
-        except ValueError:
-            sd = math.nan
-        if not (math.isfinite(sd) and sd > 0):
-            raise ValueError(f"scripted base {text!r}: SD must be a positive number")
-        return cls(kind, sd)
+        temperature = _positive(temp, text, "TEMPERATURE") if at else 1.0
+        sd = _positive(arg, text, "SD") if arg else NOISE_SD
+        return cls(kind, sd, temperature=temperature)
 
     def _rng(self, request: DecisionRequest) -> random.Random:
         o = request.observation
@@ -157,8 +166,8 @@ class Base:
 class DegradedScorer(ReferenceScorer):
     """The reference scorer with a degraded ``Base`` (a testbed with headroom)."""
 
-    def __init__(self, base: Base, temperature: float = 1.0) -> None:
-        super().__init__(temperature)
+    def __init__(self, base: Base) -> None:
+        super().__init__(base.temperature)
         self.base = base
         self.name = f"scripted:{base.name}"
 
@@ -172,7 +181,7 @@ class DegradedScorer(ReferenceScorer):
 def scorer_for(base: str | Base) -> ReferenceScorer:
     """The scorer of a base name (``ValueError`` for an unknown one)."""
     b = Base.parse(base) if isinstance(base, str) else base
-    return ReferenceScorer() if b.kind == "reference" else DegradedScorer(b)
+    return ReferenceScorer() if b == Base() else DegradedScorer(b)
 
 
 def scorer_from_env() -> ReferenceScorer:
