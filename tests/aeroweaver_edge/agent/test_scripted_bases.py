@@ -142,3 +142,18 @@ def test_scorer_from_env(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(ENV_BASE, "bogus")
     with pytest.raises(ValueError, match="bogus"):
         scorer_from_env()
+
+
+async def test_temperature_keeps_the_argmax_and_shrinks_the_gaps() -> None:
+    assert Base.parse("hold-biased@5") == Base("hold-biased", temperature=5.0)
+    assert Base.parse("noisy:1@2").name == "noisy:1@2"
+    for bad in ("hold-biased@0", "hold-biased@", "noisy:@2", "x@2"):
+        with pytest.raises(ValueError, match="scripted base"):
+            Base.parse(bad)
+    req = request()
+    sure = await logits("hold-biased", req)
+    soft = await logits("hold-biased@5", req)
+    assert max(sure, key=lambda k: sure[k]) == max(soft, key=lambda k: soft[k])
+    first = next(iter(sure))
+    for k in sure:
+        assert soft[k] - soft[first] == pytest.approx((sure[k] - sure[first]) / 5)

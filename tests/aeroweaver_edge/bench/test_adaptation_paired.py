@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from aeroweaver_edge.bench import adaptation_why
 from aeroweaver_edge.cli import main as cli
 
 TASKS = ["coverage", "line_formation"]
@@ -51,6 +52,10 @@ def test_tiny_paired_run_summary_curves_and_resume(
         assert t["mean_diff"] == pytest.approx(sum(diffs) / 2)
     for p in data["curves"]:
         assert Path(p).read_bytes()[:4] == b"\x89PNG"
+    assert adaptation_why.main([str(tmp_path / "hb-runs")]) == 0  # the "why" of paired cells
+    why = (tmp_path / "hb-runs" / "why.md").read_text()
+    assert "[hold-biased] beta=0.8 horizon:2,support:2" in why
+    assert "[hold-biased] beta=0 |" in why
     # the hold-biased base really is degraded: it chooses holds the reference never does
     assert sum(sum(t["chosen_holds_per_sequence"]["beta0"]) for t in data["tasks"].values()) > 0
 
