@@ -87,6 +87,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.memory_dir:
         check_memory_dir(Path(args.memory_dir))
     check_skills()
+    if args.selector == "scripted":  # a bad AEROWEAVER_SCRIPTED_BASE: one line, before any start
+        from aeroweaver_edge.agent.scripted import scorer_from_env
+
+        scorer_from_env()
     if args.pace is not None and args.pace > 60:
         raise UserError(f"--pace {args.pace:g}: at most 60 seconds per round")
     llm = _llm_from_args(args) if args.selector == "llm" else LLMConfig()

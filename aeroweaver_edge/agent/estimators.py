@@ -41,6 +41,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final
 
+from aeroweaver_edge.errors import UserError
+
 ENV_ESTIMATOR: Final = "AEROWEAVER_ESTIMATOR"
 Traj = tuple[str, str, int]  # (run, uav, episode)
 RunKey = tuple[str, str, int, int]  # (run, uav, episode, round)
@@ -144,8 +146,14 @@ PAPER: Final = Estimator()
 
 
 def estimator_from_env() -> Estimator:
-    """The estimator ``AEROWEAVER_ESTIMATOR`` names (unset or empty: the paper's rule)."""
-    return Estimator.parse(os.environ.get(ENV_ESTIMATOR, "") or "paper")
+    """The estimator ``AEROWEAVER_ESTIMATOR`` names (unset or empty: the paper's rule); a
+    bad value is the user's to fix (``UserError``: one line, exit 2, before any flight)."""
+    try:
+        return Estimator.parse(os.environ.get(ENV_ESTIMATOR, "") or "paper")
+    except ValueError as exc:
+        raise UserError(
+            f"{ENV_ESTIMATOR}: {exc}", f"unset it or set e.g. {ENV_ESTIMATOR}=paper"
+        ) from None
 
 
 class HorizonBook:

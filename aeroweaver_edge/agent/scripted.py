@@ -32,6 +32,7 @@ from functools import cache
 from typing import Final
 
 from aeroweaver_edge.defaults import HOLD_SKILL
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.ports import DecisionRequest
 from aeroweaver_edge.scores import LabelScores
 from aeroweaver_edge.tasks.base import ReferencePolicy
@@ -185,8 +186,14 @@ def scorer_for(base: str | Base) -> ReferenceScorer:
 
 
 def scorer_from_env() -> ReferenceScorer:
-    """The scorer ``AEROWEAVER_SCRIPTED_BASE`` names (unset or empty: the reference)."""
-    return scorer_for(os.environ.get(ENV_BASE, "") or "reference")
+    """The scorer ``AEROWEAVER_SCRIPTED_BASE`` names (unset or empty: the reference); a bad
+    value is a ``UserError`` (one line, exit 2)."""
+    try:
+        return scorer_for(os.environ.get(ENV_BASE, "") or "reference")
+    except ValueError as exc:
+        raise UserError(
+            f"{ENV_BASE}: {exc}", f"unset it or set e.g. {ENV_BASE}=reference"
+        ) from None
 
 
 __all__ = [

@@ -55,3 +55,16 @@ def test_bad_estimator_is_one_line_exit_2(
     assert "estimator" in err
     assert repr(bad) in err
     assert not out.exists()
+
+
+def test_bad_scripted_base_in_the_environment_is_one_line_exit_2(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("AEROWEAVER_SCRIPTED_BASE", "lazy")
+    out = tmp_path / "run.json"
+    assert main(["sim", "--selector", "scripted", "--quiet", "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "AEROWEAVER_SCRIPTED_BASE" in err
+    assert "'lazy'" in err
+    assert not out.exists()

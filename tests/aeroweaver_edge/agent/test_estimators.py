@@ -20,6 +20,7 @@ from aeroweaver_edge.agent.estimators import (
 )
 from aeroweaver_edge.agent.memory import AsyncExperienceMemory, ExperienceMemory
 from aeroweaver_edge.config import AgentConfig
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.wire import ExperienceRecord, Header
 
 T, R = "coverage", "searcher"
@@ -56,6 +57,9 @@ def test_from_env(monkeypatch: pytest.MonkeyPatch) -> None:
     m = ExperienceMemory.from_config(AgentConfig())
     assert m.estimator == Estimator(2)
     m.close()
+    monkeypatch.setenv(ENV_ESTIMATOR, "horizon:zero")
+    with pytest.raises(UserError, match="AEROWEAVER_ESTIMATOR: estimator 'horizon:zero'"):
+        estimator_from_env()
 
 
 def test_async_from_config_reads_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
