@@ -56,9 +56,10 @@ async def open_selector(
             yield remote, SelectorInfo(remote.name, cfg.llm.model)
         return
     if cfg.agent.selector == "scripted":
-        from aeroweaver_edge.agent.scripted import ReferenceScorer
+        from aeroweaver_edge.agent.scripted import scorer_from_env
 
-        yield ReferenceScorer(), SelectorInfo(ReferenceScorer.name)
+        scorer = scorer_from_env()  # the reference, or a degraded base (issue 24)
+        yield scorer, SelectorInfo(scorer.name)
         return
     from aeroweaver_edge.agent.llm_selector import LLMSelector
     from aeroweaver_edge.llm.client import ChatClient

@@ -57,6 +57,16 @@ if TYPE_CHECKING:
     from aeroweaver_edge.security.keys_dir import SwarmDir
 
 
+def _estimator(text: str) -> str:
+    """``--estimator``: the canonical name, or one line naming the problem (exit 2)."""
+    from aeroweaver_edge.agent.estimators import Estimator
+
+    try:
+        return Estimator.parse(text).name
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
     url = args.llm or os.environ.get("AEROWEAVER_LLM_URL")
     model = args.model or os.environ.get("AEROWEAVER_LLM_MODEL")
@@ -89,6 +99,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.memory_dir:
         check_memory_dir(Path(args.memory_dir))
     check_skills()
+    if args.selector == "scripted":  # a bad AEROWEAVER_SCRIPTED_BASE: one line, before any start
+        from aeroweaver_edge.agent.scripted import scorer_from_env
+
+        scorer_from_env()
     if args.pace is not None and args.pace > 60:
         raise UserError(f"--pace {args.pace:g}: at most 60 seconds per round")
     llm = _llm_from_args(args) if args.selector == "llm" else LLMConfig()
@@ -123,6 +137,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
         approval=args.approval,
         require_llm_answer=True,  # a run whose every decision would be a hold is refused
     )
+    # the daemons read it at start (in-process and --processes alike): no config field yet
+    from aeroweaver_edge.agent.estimators import ENV_ESTIMATOR
+
+    os.environ[ENV_ESTIMATOR] = args.estimator
     view = None if args.quiet else LiveView()
     if args.console:
         from aeroweaver_edge.cli_operator import require_extra
@@ -573,6 +591,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="experience correction weight, >= 0 (0: plain)",
     )
     s.add_argument(
+        "--estimator", type=_estimator, default="paper",
+        help="advantage estimator: paper (default), horizon:H, support:M, or comma-joined "
+        "(horizon:3,support:4); docs/adaptation.md",
+    )  # fmt: skip
+    s.add_argument(
         "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"
     )
     s.add_argument(
@@ -816,6 +839,7 @@ def _add_log_flags(top: argparse.ArgumentParser) -> None:
 
 BENCH_WHATS = [
     "run",
+    "adaptation",
     "memory",
     "memory-kill",
     "kill-restart",
@@ -847,6 +871,19 @@ def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    given = list(sys.argv[1:] if argv is None else argv)
+    verbose = bool(given) and given[0] in ("-v", "--verbose")
+    if given[verbose : verbose + 2] == ["bench", "adaptation"]:  # its own parser
+        from aeroweaver_edge.bench import adaptation
+
+        logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING)
+        try:
+            return adaptation.main(given[verbose + 2 :], prog="aeroweaver bench adaptation")
+        except (KeyboardInterrupt, asyncio.CancelledError):
+            print("aeroweaver: bench stopped; rerun the same command to resume", file=sys.stderr)
+            return 130
+        except Exception as exc:
+            return report(exc, verbose=verbose)
     bench_run = _bench_run_args(sys.argv[1:] if argv is None else argv)
     if bench_run is not None:
         from aeroweaver_edge.bench import runner

@@ -283,6 +283,16 @@ class PeerLink:
     def _precheck_beacon(self, key: str, beacon: StateBeacon) -> bool:
         """The beacon checks that need no signature and change nothing; the rest (replay
         order, motion) run on the verified beacon."""
+        if not self._beacon_from_a_known_peer(key, beacon):
+            return False
+        if self._replay.would_refuse(beacon.h, stream="beacon") is not None:
+            self.inbox.reject("stale_beacon", key)
+            return False
+        return True
+
+    def _beacon_from_a_known_peer(self, key: str, beacon: StateBeacon) -> bool:
+        """Another UAV's beacon on its own key, from a peer we know (refusals counted);
+        our own beacon, delivered locally, is silently not one."""
         if beacon.uav == self.uav:
             return False
         if key != self._keys.state(beacon.uav) or beacon.h.sender != beacon.uav:
@@ -291,9 +301,6 @@ class PeerLink:
         known = self.limits.known_peers
         if known is not None and beacon.uav not in known:
             self.inbox.reject("unknown_peer", key)
-            return False
-        if self._replay.would_refuse(beacon.h, stream="beacon") is not None:
-            self.inbox.reject("stale_beacon", key)
             return False
         return True
 
@@ -331,14 +338,7 @@ class PeerLink:
         """Latest wins by (epoch, seq); the key, the payload and the header must agree, and
         the claimed position must be physically plausible."""
         key, beacon = item
-        if beacon.uav == self.uav:
-            return False  # our own beacon, delivered locally
-        if key != self._keys.state(beacon.uav) or beacon.h.sender != beacon.uav:
-            self.inbox.reject("spoofed_beacon", key)
-            return False
-        known = self.limits.known_peers
-        if known is not None and beacon.uav not in known:
-            self.inbox.reject("unknown_peer", key)
+        if not self._beacon_from_a_known_peer(key, beacon):
             return False
         implausible = self._implausible(beacon)
         if implausible is not None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -30,6 +31,9 @@ class UavProgress:
     cpu_s: deque[float] = field(default_factory=lambda: deque(maxlen=4096))
     rejected: dict[str, int] = field(default_factory=dict)  # the daemon's refusals (latest)
     missing_messages: int = 0  # expected messages that never reached it (latest)
+    rewarded: int = 0  # round reports that carried a reward (the field usually has none)
+    reward_sum: float = 0.0
+    first_round: int | None = None  # the daemon's own round numbers this mission spans
 
 
 @dataclass
@@ -78,6 +82,11 @@ class ProgressBoard:
         p.llm_calls += rep.llm_calls
         p.latencies_s.append(rep.latency_s)
         p.cpu_s.append(rep.cpu_s)
+        if rep.reward is not None and math.isfinite(rep.reward):
+            p.rewarded += 1
+            p.reward_sum += rep.reward
+        if p.first_round is None:
+            p.first_round = rep.round
         tokens = rep.prompt_tokens + rep.completion_tokens
         self.episode_tokens[rep.episode] = self.episode_tokens.get(rep.episode, 0) + tokens
         return True

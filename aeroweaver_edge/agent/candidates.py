@@ -69,3 +69,18 @@ def build_candidates(
         cands.append(Candidate(label=label, skill=name, params=params.model_dump(), text=text))
         params_by_label[label] = params
     return CandidateSet(tuple(cands), params_by_label)
+
+
+def seeded_order(items: Sequence[str], key: str) -> list[str]:
+    """``items`` sorted by a hash of (``key``, item): one seeded permutation of every item
+    that could appear under ``key``, restricted to ``items``. Two lists drawn under the same
+    key list the items they share in the same relative order, whatever else each holds, so a
+    condition that offers fewer skills does not reorder the ones it has in common (the
+    benchmark's option-order control, docs/benchmark.md). Stable across Python versions and
+    processes (sha256, not ``hash``)."""
+    import hashlib
+
+    def rank(item: str) -> bytes:
+        return hashlib.sha256(f"{key}\x00{item}".encode()).digest()
+
+    return sorted(dict.fromkeys(items), key=rank)

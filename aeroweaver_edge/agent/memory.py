@@ -45,7 +45,9 @@ Retrieval (the exact algorithm of DESIGN §5)
     memory first stored the record, newer first). Baseline = mean return of the
     neighbourhood; A(skill) = mean return of the neighbourhood's records of that skill
     minus the baseline; an unseen skill gets 0. Everything is unweighted. The key is the
-    skill name, so every parameterisation shares its skill's advantage.
+    skill name, so every parameterisation shares its skill's advantage. That is the
+    default estimator; the others (equal-horizon returns, minimum support) and the
+    arithmetic itself live in ``agent.estimators`` (``estimator=``).
 
 Peers' share (issue 22: one compromised peer stored 8-12k records in every peer and made
     >99 % of a role's memory its own)
@@ -89,6 +91,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final, Literal, TypeVar
 
+from aeroweaver_edge.agent.estimators import PAPER, Estimator, HorizonBook, estimator_from_env
 from aeroweaver_edge.agent.state_tokens import TOKENIZER_VERSION, tokenise
 from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.wire import MAX_TEXT, ExperienceRecord, Header
@@ -245,8 +248,10 @@ class _Group:
     """In-memory inverted index of one (task, role): position i = i-th record by seq."""
 
     __slots__ = (
+        "book",
         "dead",
         "final",
+        "gone",
         "keys",
         "origin",
         "origin_count",
@@ -262,7 +267,8 @@ class _Group:
         "skills",
     )
 
-    def __init__(self) -> None:
+    def __init__(self, book: HorizonBook | None = None) -> None:
+        self.book = book  # an estimator's per-record bookkeeping (agent.estimators)
         self.seq = array("q")
         self.size = array("i")  # token-set size
         self.ret = array("d")  # NaN = no return yet
@@ -278,6 +284,7 @@ class _Group:
         self.origin_ids: dict[str, int] = {}
         self.origin_count: list[int] = []  # live records per origin id
         self.dead = 0  # evicted positions (never eligible; the group is rebuilt when many)
+        self.gone = array("b")  # 1 = evicted: excluded under every estimator
 
     def __len__(self) -> int:
         return len(self.seq)
@@ -287,6 +294,7 @@ class _Group:
         i = self.pos.pop(key, None)
         if i is not None:
             self.ret[i] = math.nan
+            self.gone[i] = 1
             self.origin_count[self.origin[i]] -= 1
             self.dead += 1
 
@@ -299,7 +307,9 @@ class _Group:
         ret: float | None,
         final: bool,
         origin: str = LOCAL,
+        rewards: Iterable[tuple[int, float]] = (),
     ) -> None:
+        """``rewards``: (round, reward) of the record's trajectory known now (the book's)."""
         i = len(self.seq)
         oid = self.origin_ids.get(origin)
         if oid is None:
@@ -324,9 +334,12 @@ class _Group:
         self.size.append(n_tokens)
         self.ret.append(math.nan if ret is None else ret)
         self.final.append(1 if final else 0)
+        self.gone.append(0)
         self.skill.append(sid)
         self.pos[key] = i
         self.keys.append(key)
+        if self.book is not None:
+            self.book.added(i, key, rewards)
 
 
 class ExperienceMemory:
@@ -345,6 +358,7 @@ class ExperienceMemory:
         max_records_per_sender: int = MAX_RECORDS_PER_SENDER,
         max_bytes_per_sender: int = MAX_BYTES_PER_SENDER,
         max_sender_share: float = MAX_SENDER_SHARE,
+        estimator: Estimator = PAPER,
     ) -> None:
         """``durable=True`` sets ``synchronous=FULL`` (commits survive power loss); the
         default ``NORMAL`` is crash-consistent and may lose the last commits on power loss,
@@ -368,6 +382,7 @@ class ExperienceMemory:
         self.gamma = gamma
         self.neighbourhood = neighbourhood
         self.finalised_only = finalised_only
+        self.estimator = estimator
         self.run = run or new_run_id()
         self.required = required and self.path is not None
         self.quarantined: Path | None = None
@@ -388,6 +403,7 @@ class ExperienceMemory:
             finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
+            estimator=estimator_from_env(),
         )
 
     # ------------------------------------------------------------------ opening
@@ -622,14 +638,25 @@ class ExperienceMemory:
     def _group(self, task: str, role: str) -> _Group:
         group = self._groups.get((task, role))
         if group is None:
-            group = _Group()
-            for seq, run, uav, episode, rnd, tokens, skill, ret, final, origin in self._db.execute(
-                "SELECT seq, run, uav, episode, round, tokens, skill, ret, final, origin "
-                "FROM records WHERE task = ? AND role = ? ORDER BY seq",
-                (task, role),
+            book = self.estimator.book(self.gamma)
+            group = _Group(book)
+            for seq, run, uav, episode, rnd, tokens, skill, ret, final, rw, origin in (
+                self._db.execute(
+                    "SELECT seq, run, uav, episode, round, tokens, skill, ret, final, reward, "
+                    "origin FROM records WHERE task = ? AND role = ? ORDER BY seq",
+                    (task, role),
+                )
             ):
-                key = (run, uav, episode, rnd)
-                group.add(key, seq, tokens.split(), skill, ret, bool(final), origin)
+                group.add(
+                    (run, uav, episode, rnd), seq, tokens.split(), skill, ret, bool(final),
+                    origin, () if rw is None else ((rnd, rw),),
+                )  # fmt: skip
+            if book is not None:  # our own rewards, also of rounds without a record
+                for run, uav, episode, rnd, rw in self._db.execute(
+                    "SELECT run, uav, episode, round, reward FROM rewards"
+                ):
+                    if (run, uav, episode) in book.members:
+                        book.reward((run, uav, episode, rnd), rw)
             self._groups[(task, role)] = group
         return group
 
@@ -656,7 +683,7 @@ class ExperienceMemory:
         skill = skill_of(skill)
         run = self.run
 
-        def go() -> tuple[int, float | None, float | None] | None:
+        def go() -> tuple[int, float | None, float | None, list[tuple[int, float]]] | None:
             with self._tx():
                 rewards = self._db.execute(
                     "SELECT round, reward, source FROM rewards "
@@ -689,14 +716,17 @@ class ExperienceMemory:
                 if cur.rowcount == 0:
                     return None
                 assert cur.lastrowid is not None
-                return cur.lastrowid, own[0], ret
+                return cur.lastrowid, own[0], ret, [(u, r) for u, r, _ in rewards]
 
         done = self._guard("append", None, go)
         if done is None:
             return False
         group = self._groups.get((task, role))
         if group is not None:
-            group.add((run, uav, episode, round), done[0], tokens, skill, done[2], False)
+            group.add(
+                (run, uav, episode, round), done[0], tokens, skill, done[2], False,
+                rewards=done[3],
+            )
         return True
 
     def add_reward(self, uav: str, episode: int, round: int, reward: float, source: str) -> bool:
@@ -754,11 +784,18 @@ class ExperienceMemory:
         updates = self._guard("add_reward", None, go)
         if updates is None:
             return False
+        books = set()
         for task, role, key, ret in updates:
             group = self._groups.get((task, role))
             i = group.pos.get(key) if group is not None else None
             if group is not None and i is not None:
                 group.ret[i] = ret
+                if group.book is not None:
+                    books.add((task, role))
+        for g in books:
+            book = self._groups[g].book
+            assert book is not None
+            book.reward((run, uav, episode, round), reward)
         return True
 
     def finalise(self, uav: str, episode: int) -> int:
@@ -893,11 +930,14 @@ class ExperienceMemory:
         group = self._groups.get((done[1], done[2]))
         i = group.pos.get(key) if group is not None else None
         if group is not None:
+            own = () if record.reward is None else ((record.round, record.reward),)
             if i is None:
-                group.add(key, done[0], tokens, skill, record.ret, record.final, origin)
+                group.add(key, done[0], tokens, skill, record.ret, record.final, origin, own)
             else:
                 group.ret[i] = math.nan if record.ret is None else record.ret
                 group.final[i] = 1 if record.final else 0
+                if group.book is not None and record.reward is not None:
+                    group.book.reward(key, record.reward)
         return True
 
     def credit_peer(self, record: ExperienceRecord) -> int:
@@ -1095,7 +1135,19 @@ class ExperienceMemory:
         return out_pos, out_sim
 
     def _eligible(self, group: _Group, i: int) -> bool:
+        if group.gone[i]:
+            return False  # evicted (a peer over its caps): never eligible again
+        if group.book is not None:
+            final = group.final[i] != 0
+            return group.book.eligible(i, final) and (not self.finalised_only or final)
         return not math.isnan(group.ret[i]) and (not self.finalised_only or group.final[i] != 0)
+
+    @staticmethod
+    def _values(group: _Group, pos: list[int]) -> list[float]:
+        """The records' values for the estimator: returns, or the book's (agent.estimators)."""
+        if group.book is None:
+            return [group.ret[i] for i in pos]
+        return group.book.values(pos, group.final)
 
     def _select_python(
         self, group: _Group, tokens: frozenset[str], k: int | None = None
@@ -1152,10 +1204,16 @@ class ExperienceMemory:
         inter = np.full(n, everywhere, dtype=np.int64)
         if lists:
             inter += np.bincount(np.concatenate(lists), minlength=n)
-        ret = np.frombuffer(group.ret, dtype=np.float64)
-        eligible = (inter > 0) & ~np.isnan(ret)
+        final = np.frombuffer(group.final, dtype=np.int8) != 0
+        if group.book is None:
+            eligible = (inter > 0) & ~np.isnan(np.frombuffer(group.ret, dtype=np.float64))
+        else:
+            count = np.frombuffer(group.book.count, dtype=np.int32)
+            eligible = (inter > 0) & ((count >= group.book.h) | (final & (count > 0)))
         if self.finalised_only:
-            eligible &= np.frombuffer(group.final, dtype=np.int8) != 0
+            eligible &= final
+        if group.dead:
+            eligible &= np.frombuffer(group.gone, dtype=np.int8) == 0
         cand = np.flatnonzero(eligible)  # ascending position == ascending recency
         if cand.size == 0:
             return [], []
@@ -1181,19 +1239,20 @@ class ExperienceMemory:
             Neighbour(
                 group.keys[i][1:],
                 group.skills[group.skill[i]],
-                group.ret[i],
+                v,
                 s,
                 group.seq[i],
                 group.keys[i][0],
             )
-            for i, s in zip(pos, sim, strict=True)
+            for i, s, v in zip(pos, sim, self._values(group, pos), strict=True)
         ]
 
     def advantages(
         self, task: str, role: str, state_text: str, skills: Iterable[str]
     ) -> dict[str, float]:
         """A(s, skill) = mean return of the neighbourhood's records of that skill minus
-        the neighbourhood's mean return; 0 for a skill the neighbourhood has not seen.
+        the neighbourhood's mean return; 0 for a skill the neighbourhood has not seen
+        (the paper's rule; ``self.estimator`` may say otherwise: ``agent.estimators``).
         Keys are the strings given (skill names or invocations; both map to the skill)."""
         names = list(skills)
         group = self._guard("retrieval", None, lambda: self._group(task, role), write=False)
@@ -1202,16 +1261,11 @@ class ExperienceMemory:
         pos, _ = self._select(group, tokenise(state_text))
         if not pos:
             return dict.fromkeys(names, 0.0)
-        rets = [group.ret[i] for i in pos]
-        baseline = math.fsum(rets) / len(rets)
-        by_skill: dict[int, list[float]] = {}
-        for i, r in zip(pos, rets, strict=True):
-            by_skill.setdefault(group.skill[i], []).append(r)
-        out: dict[str, float] = {}
-        for name in names:
-            mine = by_skill.get(group.skill_ids.get(skill_of(name), -1))
-            out[name] = 0.0 if not mine else math.fsum(mine) / len(mine) - baseline
-        return out
+        return self.estimator.advantages(
+            self._values(group, pos),
+            [group.skill[i] for i in pos],
+            {name: group.skill_ids.get(skill_of(name), -1) for name in names},
+        )
 
     def close(self) -> None:
         self._groups.clear()
@@ -1309,6 +1363,7 @@ class AsyncExperienceMemory:
         durable: bool = False,
         run: str | None = None,
         required: bool = False,
+        estimator: Estimator = PAPER,
     ) -> AsyncExperienceMemory:
         executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="aw-memory")
         loop = asyncio.get_running_loop()
@@ -1323,6 +1378,7 @@ class AsyncExperienceMemory:
                     durable=durable,
                     run=run,
                     required=required,
+                    estimator=estimator,
                 ),
             )
         except BaseException:
@@ -1341,6 +1397,7 @@ class AsyncExperienceMemory:
             finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
+            estimator=estimator_from_env(),
         )
 
     @property

@@ -7,13 +7,32 @@ observation; this scorer turns the utilities into log-softmax scores, so the sam
 arithmetic (and the experience correction) applies as for an LLM. The policy is looked up by
 the request's task; a task the registry does not know gets only the rules every policy
 shares (hold, return in bounds, explore).
+
+Degraded bases (issue 24: the correction exists to fix a weak base, so it must be shown on
+one): ``hold-biased`` adds ``HOLD_BIAS`` to ``hold_position``; ``position-biased`` shuffles
+the options with a seeded permutation per decision and adds ``POSITION_BIAS`` to the one
+shown first (what a small LLM answering ``A`` does when the order changes every round);
+``noisy[:SD]`` adds seeded Gaussian noise (default SD ``NOISE_SD``) to every utility; any
+base with ``@T`` divides the utilities by T before the log-softmax (same argmax, gaps T
+times smaller: room for the correction to act). The
+randomness is a function of (task, UAV, episode, round, own position) only, so in-process and
+``--processes`` runs agree and paired runs (beta = 0 against beta > 0) see the same noise
+in the same state.
+A daemon picks its base from ``AEROWEAVER_SCRIPTED_BASE`` (``scorer_from_env``): the
+selector config has no field for it yet.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import random
+from dataclasses import dataclass
 from functools import cache
+from typing import Final
 
+from aeroweaver_edge.defaults import HOLD_SKILL
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.ports import DecisionRequest
 from aeroweaver_edge.scores import LabelScores
 from aeroweaver_edge.tasks.base import ReferencePolicy
@@ -69,4 +88,122 @@ class ReferenceScorer:
         return None
 
 
-__all__ = ["ReferenceScorer", "log_softmax", "reference_policy"]
+HOLD_BIAS: Final = 3.0
+POSITION_BIAS: Final = 3.0
+NOISE_SD: Final = 2.0
+BASES: Final = ("reference", "hold-biased", "position-biased", "noisy")
+ENV_BASE: Final = "AEROWEAVER_SCRIPTED_BASE"
+
+
+def _positive(value: str, text: str, what: str) -> float:
+    try:
+        x = float(value)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and x > 0):
+        raise ValueError(f"scripted base {text!r}: {what} must be a positive number")
+    return x
+
+
+@dataclass(frozen=True)
+class Base:
+    """A scripted base: the reference policy, optionally degraded (module docstring)."""
+
+    kind: str = "reference"
+    sd: float = NOISE_SD
+    seed: int = 0
+    temperature: float = 1.0  # log-softmax temperature: > 1 leaves the same argmax, less sure
+
+    @property
+    def name(self) -> str:
+        name = self.kind
+        if self.kind == "noisy" and self.sd != NOISE_SD:
+            name = f"noisy:{self.sd:g}"
+        return name if self.temperature == 1.0 else f"{name}@{self.temperature:g}"
+
+    @classmethod
+    def parse(cls, text: str) -> Base:
+        """``reference``, ``hold-biased``, ``position-biased`` or ``noisy[:SD]``, each
+        optionally ``@T`` (temperature T > 0); ``ValueError`` naming the choices otherwise."""
+        body, at, temp = text.strip().partition("@")
+        kind, colon, arg = body.partition(":")
+        if kind not in BASES or (colon and (kind != "noisy" or not arg)):
+            raise ValueError(
+                f"unknown scripted base {text!r}: expected one of reference, hold-biased, "
+                "position-biased, noisy[:SD], optionally @TEMPERATURE"
+            )
+        temperature = _positive(temp, text, "TEMPERATURE") if at else 1.0
+        sd = _positive(arg, text, "SD") if arg else NOISE_SD
+        return cls(kind, sd, temperature=temperature)
+
+    def _rng(self, request: DecisionRequest) -> random.Random:
+        o = request.observation
+        # a str seed is hashed with SHA-512: the same in every process (no PYTHONHASHSEED)
+        # the position tells layouts (seed sequences) apart: episode e of every sequence
+        # would otherwise draw the same noise
+        key = f"{self.kind}|{self.seed}|{request.task}|{o.uav}|{o.episode}|{o.round}|{o.own.pos}"
+        return random.Random(key)
+
+    def degrade(self, request: DecisionRequest, utils: dict[str, float]) -> dict[str, float]:
+        """The base's utilities from the reference ones (a new dict)."""
+        out = dict(utils)
+        if self.kind == "hold-biased":
+            for c in request.candidates:
+                if c.skill == HOLD_SKILL and c.label in out:
+                    out[c.label] += HOLD_BIAS
+        elif self.kind == "position-biased":
+            order = [c.label for c in request.candidates if c.label in out]
+            if order:
+                self._rng(request).shuffle(order)
+                out[order[0]] += POSITION_BIAS
+        elif self.kind == "noisy":
+            rng = self._rng(request)
+            for c in request.candidates:  # candidate order: one draw per option, stable
+                if c.label in out:
+                    out[c.label] += rng.gauss(0.0, self.sd)
+        return out
+
+
+class DegradedScorer(ReferenceScorer):
+    """The reference scorer with a degraded ``Base`` (a testbed with headroom)."""
+
+    def __init__(self, base: Base) -> None:
+        super().__init__(base.temperature)
+        self.base = base
+        self.name = f"scripted:{base.name}"
+
+    async def score(self, request: DecisionRequest) -> LabelScores:
+        if not request.candidates:
+            return LabelScores(logprobs={})
+        utils = self.base.degrade(request, reference_policy(request.task).utilities(request))
+        return LabelScores(logprobs=log_softmax(utils, self.temperature))
+
+
+def scorer_for(base: str | Base) -> ReferenceScorer:
+    """The scorer of a base name (``ValueError`` for an unknown one)."""
+    b = Base.parse(base) if isinstance(base, str) else base
+    return ReferenceScorer() if b == Base() else DegradedScorer(b)
+
+
+def scorer_from_env() -> ReferenceScorer:
+    """The scorer ``AEROWEAVER_SCRIPTED_BASE`` names (unset or empty: the reference); a bad
+    value is a ``UserError`` (one line, exit 2)."""
+    try:
+        return scorer_for(os.environ.get(ENV_BASE, "") or "reference")
+    except ValueError as exc:
+        raise UserError(
+            f"{ENV_BASE}: {exc}", f"unset it or set e.g. {ENV_BASE}=reference"
+        ) from None
+
+
+__all__ = [
+    "BASES",
+    "ENV_BASE",
+    "Base",
+    "DegradedScorer",
+    "ReferenceScorer",
+    "log_softmax",
+    "reference_policy",
+    "scorer_for",
+    "scorer_from_env",
+]

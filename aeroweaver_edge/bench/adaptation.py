@@ -11,24 +11,53 @@ uses layout seed ``seed + e``, so variants differ only in the correction. Every
 under ``DIR/runs/`` and is skipped when its result exists (resumable). Writes
 ``results.json``, ``results.csv``, ``table.md`` and ``team_return.png`` into ``DIR``;
 ``bench.adaptation_why`` explains the runs from their traces.
+
+Paired mode (issue 24), the statistics a reviewer accepts::
+
+    aeroweaver bench adaptation --base hold-biased --estimator horizon:3 --tasks all \
+        --sequences 10 --episodes 10 --json OUT.json [--out DIR]
+
+runs beta = 0 and beta = ``--beta`` (0.8) on the same seed sequences (sequence s uses layout
+seeds ``1 + 1000 s + e``, e = 0..K-1) for every task, and writes ``{"base", "estimator",
+"tasks": {task: {"mean_diff", "ci95", "better", "worse", "equal", "p_wilcoxon", ...}}}``:
+``mean_diff`` is the mean over sequences of (beta run's mean return - beta 0 run's mean
+return), ``ci95`` a seeded percentile bootstrap of it over sequences, better / worse /
+equal count sequences, ``p_wilcoxon`` the two-sided signed-rank test over the per-sequence
+differences (``bench.paired_stats``). One cell per (base, task, sequence, beta[,
+estimator]) under ``DIR/runs/``, skipped when done (resumable; the beta = 0 cells do not
+depend on the estimator and are shared); a progress line per cell; a learning-curve PNG
+per task (mean return by episode index with a 95 % band) in
+``DIR/curves/<base>/<estimator>/``. ``--base`` is a scripted base (``agent.scripted``:
+reference, hold-biased, position-biased, noisy[:SD]) or ``llm`` (the ``--llm`` endpoint,
+default the embedded model); ``--estimator`` one of ``agent.estimators`` (paper,
+horizon:H, support:M, centre, mixed with commas).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import csv
 import json
 import math
+import os
 import shutil
 import statistics
 import sys
 import tempfile
+import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from aeroweaver_edge import defaults
+from aeroweaver_edge.agent.estimators import ENV_ESTIMATOR, Estimator
+from aeroweaver_edge.agent.scripted import ENV_BASE, Base
 from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
+from aeroweaver_edge.bench.paired_stats import paired_summary
+from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
@@ -84,10 +113,17 @@ async def run_one(
     run_dir: Path,
     keep_memory: bool,
     deadline_s: float,
+    *,
+    base: str = "reference",
+    estimator: str = "paper",
+    max_rounds: int | None = None,
 ) -> dict[str, Any]:
     await asyncio.to_thread(run_dir.mkdir, parents=True, exist_ok=True)
     trace_path = run_dir / "trace.jsonl"
-    with tempfile.TemporaryDirectory(prefix="aw-adapt-") as tmp:
+    with (
+        tempfile.TemporaryDirectory(prefix="aw-adapt-") as tmp,
+        _environment({ENV_BASE: base, ENV_ESTIMATOR: estimator}),
+    ):
         mem = Path(tmp)
         opts = SwarmOptions(
             task=task,
@@ -101,6 +137,7 @@ async def run_one(
             memory_dir=mem,
             trace_path=trace_path,
             deadline_s=deadline_s,
+            max_rounds=max_rounds or defaults.MAX_ROUNDS,
         )
         summary = (await run_swarm(opts)).as_dict()
         if keep_memory:
@@ -114,6 +151,8 @@ async def run_one(
         "variant": variant.name,
         "beta": variant.beta,
         "finalised_only": variant.finalised_only,
+        "base": base,
+        "estimator": estimator,
         "selector": summary["selector"],
         "model": summary["model"],
         "probe": summary["probe"],
@@ -140,6 +179,22 @@ async def run_one(
     }
     write_json_file(run_dir / "result.json", result)
     return result
+
+
+@contextlib.contextmanager
+def _environment(values: dict[str, str]) -> Iterator[None]:
+    """The daemons of a run read their scripted base and estimator from the environment
+    (the agent config has no field for them yet); restored afterwards."""
+    old = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _load(path: Path) -> dict[str, Any] | None:
@@ -316,10 +371,227 @@ def write_reports(results: list[dict[str, Any]], out: Path, command: str) -> Non
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m aeroweaver_edge.bench.adaptation")
+# ---------------------------------------------------------------- paired mode (issue 24)
+
+SEQUENCE_STRIDE = 1000  # sequence s uses layout seeds 1 + 1000 s + e: never overlapping
+
+
+def sequence_seed(s: int) -> int:
+    return 1 + SEQUENCE_STRIDE * s
+
+
+def _cell_dir(out: Path, base: str, task: str, seq: int, beta: float, estimator: str) -> Path:
+    """beta = 0 never consults the estimator (``decision_round``): its cells are shared."""
+    name = "b0" if beta == 0 else f"b{beta:g}-{estimator.replace(':', '').replace(',', '-')}"
+    return out / "runs" / base.replace(":", "") / task / f"seq{seq}" / name
+
+
+def _returns(cell: dict[str, Any]) -> list[float]:
+    return [float(e["team_return"]) for e in cell["episodes"]]
+
+
+async def run_paired(args: argparse.Namespace, llm: LLMConfig) -> dict[str, Any]:
+    """Every (task, sequence, beta) cell, resuming the ones done; the summary."""
+    out = Path(args.out)
+    selector: Literal["llm", "scripted"] = "llm" if args.base == "llm" else "scripted"
+    base = "reference" if args.base == "llm" else args.base
+    todo = [
+        (task, seq, beta)
+        for task in args.tasks
+        for seq in range(args.sequences)
+        for beta in (0.0, args.beta)
+    ]
+    cells: dict[tuple[str, int, float], dict[str, Any]] = {}
+    started = time.monotonic()
+    ran = 0
+    for n, (task, seq, beta) in enumerate(todo, 1):
+        run_dir = _cell_dir(out, args.base, task, seq, beta, args.estimator)
+        done = _load(run_dir / "result.json")
+        if done is None or len(done["episodes"]) != args.episodes:
+            done = await run_one(
+                task, sequence_seed(seq), Variant(beta), args.episodes, args.uavs, selector,
+                llm, run_dir, args.keep_memory, args.deadline, base=base,
+                estimator=args.estimator, max_rounds=args.rounds,
+            )  # fmt: skip
+            ran += 1
+            left = sum(
+                1
+                for t, q, b in todo[n:]
+                if _load(_cell_dir(out, args.base, t, q, b, args.estimator) / "result.json") is None
+            )
+            per = (time.monotonic() - started) / ran
+            print(
+                f"[{n}/{len(todo)}] {task} seq {seq} beta={beta:g}: mean return "
+                f"{statistics.fmean(_returns(done)):.2f} ({done['wall_s']:.1f} s; "
+                f"about {left * per / 60:.0f} min left)",
+                file=sys.stderr,
+                flush=True,
+            )
+        cells[(task, seq, beta)] = done
+    return summarise(args, cells)
+
+
+def summarise(
+    args: argparse.Namespace, cells: dict[tuple[str, int, float], dict[str, Any]]
+) -> dict[str, Any]:
+    tasks: dict[str, Any] = {}
+    for task in args.tasks:
+        zero = [cells[(task, s, 0.0)] for s in range(args.sequences)]
+        beta = [cells[(task, s, args.beta)] for s in range(args.sequences)]
+        rec = paired_summary(
+            [statistics.fmean(_returns(c)) for c in beta],
+            [statistics.fmean(_returns(c)) for c in zero],
+        )
+        eps = [
+            x - y
+            for b, z in zip(beta, zero, strict=True)
+            for x, y in zip(_returns(b), _returns(z), strict=True)
+        ]
+        holds = {
+            name: [sum(e["holds_by_cause"].get("chosen", 0) for e in c["episodes"]) for c in cs]
+            for name, cs in (("beta0", zero), ("beta", beta))
+        }
+        tasks[task] = {
+            **rec,
+            "episodes_better": sum(d > 1e-9 for d in eps),
+            "episodes_worse": sum(d < -1e-9 for d in eps),
+            "episodes_equal": sum(abs(d) <= 1e-9 for d in eps),
+            "beta0_mean": statistics.fmean(statistics.fmean(_returns(c)) for c in zero),
+            "beta_mean": statistics.fmean(statistics.fmean(_returns(c)) for c in beta),
+            "chosen_holds_per_sequence": holds,
+        }
+    wins = sum(t["ci95"][0] > 0 for t in tasks.values())
+    losses = sum(t["ci95"][1] < 0 for t in tasks.values())
+    first = cells[(args.tasks[0], 0, 0.0)]
+    return {
+        "base": args.base,
+        "estimator": args.estimator,
+        "beta": args.beta,
+        "sequences": args.sequences,
+        "episodes": args.episodes,
+        "rounds": args.rounds,
+        "seeds": [sequence_seed(s) for s in range(args.sequences)],
+        "selector": first["selector"] if args.base == "llm" else f"scripted:{args.base}",
+        "note": first.get("note"),
+        "tasks": tasks,
+        "verdict": {"ci95_lo_above_0": wins, "ci95_hi_below_0": losses},
+        "command": args.command,
+    }
+
+
+def curves(
+    args: argparse.Namespace, cells: dict[tuple[str, int, float], dict[str, Any]], out: Path
+) -> list[Path]:
+    """Learning curves per task: mean return by episode index over sequences, 95 % band
+    (normal approximation, mean +- 1.96 SE)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib not installed: no curves (pip install -e '.[plot]')", file=sys.stderr)
+        return []
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for task in args.tasks:
+        fig, ax = plt.subplots(figsize=(5.0, 3.4), dpi=110)
+        for beta, label in ((0.0, "beta=0"), (args.beta, f"beta={args.beta:g} {args.estimator}")):
+            runs = [_returns(cells[(task, s, beta)]) for s in range(args.sequences)]
+            xs = list(range(args.episodes))
+            ys = [statistics.fmean(r[i] for r in runs) for i in xs]
+            se = [
+                statistics.stdev(r[i] for r in runs) / math.sqrt(len(runs)) if len(runs) > 1 else 0
+                for i in xs
+            ]
+            ax.plot(xs, ys, marker="o", label=label)
+            ax.fill_between(
+                xs, [y - 1.96 * e for y, e in zip(ys, se, strict=True)],
+                [y + 1.96 * e for y, e in zip(ys, se, strict=True)], alpha=0.2,
+            )  # fmt: skip
+        ax.set_title(f"{task}: base {args.base}, {args.sequences} sequences", fontsize=9)
+        ax.set_xlabel("episode (memory persists)")
+        ax.set_ylabel("team return")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = out / f"{task}.png"
+        fig.savefig(path)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def _task_list(text: str) -> str:
+    return "all" if text == "all" else canonical_task(text)
+
+
+def _base(text: str) -> str:
+    if text == "llm":
+        return text
+    try:
+        return Base.parse(text).name
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (or llm)") from None
+
+
+def _estimator(text: str) -> str:
+    try:
+        return Estimator.parse(text).name
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 1")
+    return n
+
+
+def main_paired(args: argparse.Namespace, llm: LLMConfig) -> int:
+    json_path = Path(args.json)
+    if args.out is None:
+        args.out = str(json_path.with_suffix("")) + "-runs"
+    data = asyncio.run(run_paired(args, llm))
+    cells = {
+        (t, s, b): c
+        for t in args.tasks
+        for s in range(args.sequences)
+        for b in (0.0, args.beta)
+        if (c := _load(_cell_dir(Path(args.out), args.base, t, s, b, args.estimator)
+                       / "result.json")) is not None
+    }  # fmt: skip
+    where = Path(args.out) / "curves" / args.base.replace(":", "") / args.estimator.replace(":", "")
+    pngs = curves(args, cells, where)
+    data["curves"] = [str(p) for p in pngs]
+    write_json_file(json_path, data)
+    for task, t in data["tasks"].items():
+        print(
+            f"{task}: mean_diff {t['mean_diff']:+.2f} ci95 [{t['ci95'][0]:+.2f}, "
+            f"{t['ci95'][1]:+.2f}] better/worse/equal {t['better']}/{t['worse']}/{t['equal']} "
+            f"p {t['p_wilcoxon']:.3g}"
+        )
+    v = data["verdict"]
+    print(
+        f"{args.estimator} on base {args.base}: ci95 above 0 on {v['ci95_lo_above_0']} of "
+        f"{len(args.tasks)} tasks, below 0 on {v['ci95_hi_below_0']}; wrote {json_path}"
+    )
+    return 0
+
+
+def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
+    p = ArgumentParser(prog=prog or "python -m aeroweaver_edge.bench.adaptation")
     p.add_argument(
-        "--tasks", nargs="+", type=canonical_task, choices=TASK_NAMES, default=["coverage"]
+        "--tasks",
+        nargs="+",
+        type=_task_list,
+        choices=[*TASK_NAMES, "all"],
+        default=["coverage"],
+        help="tasks, or all",
     )
     p.add_argument("--episodes", type=int, default=8)
     p.add_argument("--seeds", type=int, nargs="+", default=None, help="seed sequences")
@@ -339,8 +611,47 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--llm-deadline", type=float, default=20.0)
     p.add_argument("--deadline", type=float, default=None, help="round deadline (s)")
     p.add_argument("--keep-memory", action="store_true", help="copy memory files to the run")
-    p.add_argument("--out", default="docs/adaptation")
+    p.add_argument("--out", default=None, help="run directory (default: docs/adaptation)")
+    paired = p.add_argument_group("paired mode (beta = 0 against --beta, issue 24)")
+    paired.add_argument("--json", metavar="OUT", help="paired mode: write the summary here")
+    paired.add_argument(
+        "--base", type=_base, default=None,
+        help="reference, hold-biased, position-biased, noisy[:SD] (scripted) or llm",
+    )  # fmt: skip
+    paired.add_argument(
+        "--estimator", type=_estimator, default=None,
+        help="paper (default), horizon:H, support:M, or comma-joined (horizon:3,support:4)",
+    )  # fmt: skip
+    paired.add_argument("--sequences", type=_positive, default=None, help="seed sequences")
+    paired.add_argument("--beta", type=float, default=0.8, help="the corrected run's beta")
+    paired.add_argument("--rounds", type=_positive, default=None, help="rounds per episode")
     args = p.parse_args(argv)
+    if "all" in args.tasks:
+        args.tasks = list(TASK_NAMES)
+    args.tasks = list(dict.fromkeys(args.tasks))
+    if args.json is not None or args.sequences is not None:
+        if args.json is None:
+            p.error("paired mode (--sequences) needs --json OUT")
+        if args.variants or args.betas or args.seeds:
+            p.error("paired mode runs beta = 0 and --beta: no --variants, --betas or --seeds")
+        if not (math.isfinite(args.beta) and args.beta > 0):
+            p.error(f"--beta {args.beta!r}: the corrected run needs a positive finite beta")
+        args.base = args.base or "reference"
+        args.estimator = args.estimator or "paper"
+        args.sequences = args.sequences or 3
+        args.deadline = args.deadline or (10.0 if args.base != "llm" else args.llm_deadline + 15)
+        args.command = f"{prog or 'python -m aeroweaver_edge.bench.adaptation'} " + " ".join(
+            argv if argv is not None else sys.argv[1:]
+        )
+        llm = LLMConfig(
+            base_url=args.llm,
+            deadline_s=args.llm_deadline,
+            **({"model": args.model} if args.model else {}),
+        )
+        return main_paired(args, llm)
+    if args.base is not None or args.estimator is not None or args.rounds is not None:
+        p.error("--base, --estimator and --rounds belong to paired mode (--json OUT)")
+    args.out = args.out or "docs/adaptation"
     args.seeds = args.seeds or [args.seed]
     if args.variants is None:
         args.variants = [Variant(b) for b in (args.betas or [0.8, 0.0])]

@@ -2,8 +2,9 @@
 
 ``python -m aeroweaver_edge.bench.adaptation_why DIR [--gamma 0.95]`` reads every
 ``DIR/runs/<task>/seed<S>/<variant>/trace.jsonl`` written by ``bench.adaptation`` (with
-``--bench``: a ``bench run`` directory's AeroWeaver and beta = 0 cells) and prints (and
-writes to ``DIR/why.md``) per task and variant:
+``--bench``: a ``bench run`` directory's AeroWeaver and beta = 0 cells), also a paired-mode
+directory's ``runs/<base>/<task>/seq<S>/<cell>`` (variants named by base and estimator),
+and prints (and writes to ``DIR/why.md``) per task and variant:
 
 * how far apart the base scores are (top-1 minus top-2 log-prob of the labels that came
   back) against how far apart the correction pushes them (beta times the spread of the
@@ -187,15 +188,22 @@ def skill_records(memory_dir: Path) -> dict[str, dict[str, float]]:
 
 def analyse(out: Path, gamma: float) -> list[dict[str, Any]]:
     rows = []
-    for result_path in sorted((out / "runs").glob("*/seed*/*/result.json")):
+    legacy = (out / "runs").glob("*/seed*/*/result.json")
+    paired = (out / "runs").glob("*/*/seq*/*/result.json")  # runs/<base>/<task>/seq<S>/<cell>
+    for result_path in sorted([*legacy, *paired]):
         result = json.loads(result_path.read_text(encoding="utf-8"))
         trace = read_trace(result_path.parent / "trace.jsonl")
         figures = decision_figures(trace, float(result["beta"]))
+        variant = result["variant"]
+        if result.get("estimator", "paper") != "paper" and result["beta"] > 0:
+            variant += f" {result['estimator']}"
+        if result.get("base", "reference") != "reference":
+            variant = f"[{result['base']}] {variant}"
         rows.append(
             {
                 "task": result["task"],
                 "seed": result["seed"],
-                "variant": result["variant"],
+                "variant": variant,
                 "selector": result["selector"],
                 "mean_return": _mean([e["team_return"] for e in result["episodes"]]),
                 **figures,

@@ -10,6 +10,11 @@
 | beta0 | as aeroweaver | top-K | yes | 0 | (not used) |
 | scripted | the task's reference policy (a heuristic, no LLM) | top-K | yes | 0 | - |
 
+Every condition lists options in one seeded order per (task, seed, UAV)
+(``SwarmOptions.option_order = "seeded"``, set by the runner): skills two conditions share
+keep their relative order, so a position-biased model is handed the same skill for ``A``
+whenever the same skills are on offer.
+
 The baselines get no interaction history either (their prompts have none), as in the paper
 ("all 22 skills without reward memory"); they share the UAVs' executors, safety gate and
 invalid -> hold rule.

@@ -18,6 +18,12 @@ from aeroweaver_edge.hold_reasons import HOLD_CAUSES
 
 
 def read_trace(path: Path) -> list[dict[str, Any]]:
+    """A trace's lines; ``.gz`` (the benchmark's archived form) is read decompressed."""
+    if path.suffix == ".gz":
+        import gzip
+
+        with gzip.open(path, "rt", encoding="utf-8") as g:
+            return [json.loads(line) for line in g if line.strip()]
     with path.open(encoding="utf-8") as f:
         return [json.loads(line) for line in f if line.strip()]
 
@@ -45,6 +51,10 @@ def _new(episode: int) -> dict[str, Any]:
         "central_reviews": {"asked": 0, "agreed": 0},
         "central_revised_rounds": 0,
         "messages": {"sent": 0},
+        # position bias: decisions where a label was picked among >= 2 options, and how
+        # many of those picked the first option listed
+        "picks": 0,
+        "first_label_picks": 0,
     }
 
 
@@ -69,6 +79,11 @@ def episode_metrics(lines: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
                 for k in ("prompt", "prompt_cached", "completion"):
                     e["tokens"]["uavs"][k] += int(d.get("tokens", {}).get(k, 0))
                 e["latency_s"].append(float(d.get("latency_s", 0.0)))
+                options = d.get("options") or []
+                if d.get("label") is not None and len(options) >= 2:
+                    e["picks"] += 1
+                    first = str(options[0]).split(".", 1)[0]
+                    e["first_label_picks"] += d["label"] == first
             central = row.get("central")
             if central:
                 e["central_rounds"] += 1

@@ -1,10 +1,15 @@
 """Tables and CSV from a benchmark directory's finished cells (``bench.runner``).
 
 Everything is recomputed from the cells' per-episode figures (which come from the traces):
-return mean and sample SD over episodes (all seeds), tokens and LLM calls per episode
-(UAVs' and central node's), decision latency p50/p95 over all decisions, uncached prompt
-tokens per LLM call, invalid-choice rate (answers without a usable label / decisions) and
-holds by cause. ``write_report`` writes ``results.csv``, ``table.md`` and the plots.
+return mean, sample SD and a 95 % bootstrap interval over episodes (all seeds); paired
+Wilcoxon signed-rank tests of every condition against AeroWeaver on the same (seed,
+episode), Holm-corrected over the whole table (``bench.stats``); tokens and LLM calls per
+episode and per round (UAVs' and central node's, plus one LLM Commander setup for the
+conditions that use its activation, ``bench.setup_cost``); position bias (share of picks
+among >= 2 options that took the first label); decision latency p50/p95, uncached prompt
+tokens per LLM call, invalid-choice rate and holds by cause. ``write_report`` writes
+``results.csv``, ``table.md``, ``summary.json`` and the plots; nothing in them depends on
+when or where it is run, so ``--report-only`` rebuilds them byte for byte from the archive.
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
+from aeroweaver_edge.bench.setup_cost import SETUP_CONDITIONS
+from aeroweaver_edge.bench.stats import bootstrap_ci, holm, wilcoxon
 from aeroweaver_edge.hold_reasons import HOLD_CAUSES
 from aeroweaver_edge.json_out import write_json_file
 
@@ -61,6 +68,13 @@ class CellStats:
     reviews_asked: int = 0
     reviews_agreed: int = 0
     revised_rounds: int = 0
+    paired: dict[tuple[int, int], float] = field(default_factory=dict)  # (seed, ep) -> return
+    per_round: list[float] = field(default_factory=list)  # tokens / rounds, per episode
+    setup: list[int] = field(default_factory=list)  # setup tokens spent in each episode
+    setup_missing: int = 0  # runs whose Commander setup could not be measured
+    picks: int = 0
+    first_picks: int = 0
+    finished: list[str] = field(default_factory=list)
 
     @property
     def n(self) -> int:
@@ -92,6 +106,15 @@ class CellStats:
     def invalid_rate(self) -> float | None:
         return self.invalid / self.decisions if self.decisions else None
 
+    @property
+    def position_bias(self) -> float | None:
+        """Share of picks (among >= 2 options) that took the first label listed."""
+        return self.first_picks / self.picks if self.picks else None
+
+    @property
+    def ci(self) -> tuple[float, float] | None:
+        return bootstrap_ci(self.returns)
+
     def absorb(self, other: CellStats) -> None:
         """Pool another cell's episodes into this one (a condition over all tasks)."""
         self.seeds += other.seeds
@@ -111,6 +134,12 @@ class CellStats:
         self.reviews_asked += other.reviews_asked
         self.reviews_agreed += other.reviews_agreed
         self.revised_rounds += other.revised_rounds
+        self.per_round += other.per_round
+        self.setup += other.setup
+        self.setup_missing += other.setup_missing
+        self.picks += other.picks
+        self.first_picks += other.first_picks
+        self.finished += other.finished
 
     def figures(self) -> dict[str, Any]:
         """The table's figures as numbers (summary.json)."""
@@ -119,12 +148,19 @@ class CellStats:
             return None if x is None else round(x, digits)
 
         episodes = len(self.calls)
+        ci = self.ci
         return {
             "cells": len(self.seeds),
             "episodes": episodes,
             "return_mean": r(self.mean(self.returns)),
             "return_sd": r(self.sd),
+            "return_ci95": None if ci is None else [r(ci[0]), r(ci[1])],
             "tokens_per_episode": r(self.mean(self.tokens), 1),
+            "tokens_per_round": r(self.mean(self.per_round), 1),
+            "setup_tokens_per_episode": r(self.mean(self.setup), 1),
+            "setup_missing_runs": self.setup_missing,
+            "position_bias": r(self.position_bias, 4),
+            "picks": self.picks,
             "central_tokens_per_episode": r(self.mean(self.central_tokens), 1),
             "llm_calls_per_episode": r(self.mean(self.calls), 2),
             "decisions": self.decisions,
@@ -156,7 +192,8 @@ def load_cells(out: Path) -> list[dict[str, Any]]:
         if isinstance(data, dict) and data.get("bench", {}).get("complete"):
             eps = data.get("episodes") or []
             trace = out / str(data["bench"].get("trace", ""))
-            if any("central_reviews" not in e for e in eps) and trace.is_file():
+            stale = any("central_reviews" not in e or "picks" not in e for e in eps)
+            if stale and trace.is_file():
                 with contextlib.suppress(OSError, ValueError):
                     data["episodes"] = episode_metrics(read_trace(trace))
             cells.append(data)
@@ -173,10 +210,20 @@ def aggregate(cells: Iterable[dict[str, Any]]) -> dict[tuple[str, str], CellStat
         s.seeds.append(b["seed"])
         s.model = data["summary"].get("model") or s.model
         s.mismatches += [f"seed {b['seed']}: {p}" for p in b.get("trace_check", [])]
-        for e in data["episodes"]:
+        s.finished.append(str(b.get("finished", ""))[:10])
+        counted = b["condition"] in SETUP_CONDITIONS
+        setup = b.get("setup_tokens") if counted else 0
+        s.setup_missing += counted and setup is None
+        for i, e in enumerate(data["episodes"]):
             if e["team_return"] is not None:
                 s.returns.append(float(e["team_return"]))
-            s.tokens.append(int(e["tokens_total"]))
+                s.paired[(int(b["seed"]), int(e["episode"]))] = float(e["team_return"])
+            spent = int(setup or 0) if i == 0 else 0  # once per run: its first episode
+            s.setup.append(spent)
+            s.tokens.append(int(e["tokens_total"]) + spent)
+            s.per_round.append((int(e["tokens_total"]) + spent) / max(1, int(e["rounds"])))
+            s.picks += int(e.get("picks", 0))
+            s.first_picks += int(e.get("first_label_picks", 0))
             ct = e["tokens"]["central"]
             s.central_tokens.append(int(ct["prompt"] + ct["completion"]))
             s.calls.append(int(e["llm_calls_total"]))
@@ -217,19 +264,97 @@ def token_ratios(
     return ratios
 
 
+def paired_tests(
+    stats: dict[tuple[str, str], CellStats], tasks: Sequence[str], conditions: Sequence[str]
+) -> dict[tuple[str, str], dict[str, Any]]:
+    """Every (task, condition) against AeroWeaver on the episodes both ran (same seed and
+    episode index: the same world): the mean paired difference (condition - AeroWeaver),
+    the Wilcoxon signed-rank p, and Holm's adjusted p within the condition (family: its
+    tasks). Key ``("*", c)``: all tasks pooled, each difference divided by the paper's task
+    scale K_t (a difference in Q), Holm-adjusted over the conditions.
+
+    Why these families: an exact test on n pairs cannot go below p = 2 / 2^n, so over a
+    whole table of 54 tests even n = 10 (p >= 0.002, x 54 = 0.105) could never reject; per
+    condition (9 tasks) n = 10 can (0.018). The pooled test has 9 x n pairs."""
+    found: dict[tuple[str, str], dict[str, Any]] = {}
+    pooled: dict[str, list[float]] = {}
+    for t in tasks:
+        full = stats.get((t, "aeroweaver"))
+        if full is None:
+            continue
+        for c in conditions:
+            other = stats.get((t, c))
+            if c == "aeroweaver" or other is None:
+                continue
+            keys = sorted(set(full.paired) & set(other.paired))
+            diffs = [other.paired[k] - full.paired[k] for k in keys]
+            pooled.setdefault(c, []).extend(d / PAPER_K.get(t, 1.0) for d in diffs)
+            found[(t, c)] = _test(diffs)
+    for c in sorted({c for _, c in found}):
+        family = [k for k in found if k[1] == c]
+        for k, adj in zip(family, holm([found[k]["p"] for k in family]), strict=True):
+            found[k]["p_holm"] = adj
+    overall = {("*", c): _test(d) for c, d in pooled.items()}
+    for k, adj in zip(overall, holm([v["p"] for v in overall.values()]), strict=True):
+        overall[k]["p_holm"] = adj
+    return found | overall
+
+
+def _test(diffs: Sequence[float]) -> dict[str, Any]:
+    test = wilcoxon(diffs)
+    return {
+        "pairs": len(diffs),
+        "mean_diff": statistics.fmean(diffs) if diffs else None,
+        "nonzero": 0 if test is None else test.n,
+        "w_plus": None if test is None else test.w_plus,
+        "p": None if test is None else test.p,
+    }
+
+
 def _num(x: float | None, digits: int = 2) -> str:
     return "–" if x is None or not math.isfinite(x) else f"{x:,.{digits}f}"
 
 
 def _ret(s: CellStats | None) -> str:
+    """Mean [95 % bootstrap interval] (n)."""
     if s is None or not s.returns:
         return "–"
-    sd = s.sd
+    ci = s.ci
+    if ci is None:
+        return f"{s.mean(s.returns):.2f} (n=1)"
+    return f"{s.mean(s.returns):.2f} [{ci[0]:.2f}, {ci[1]:.2f}] (n={s.n})"
+
+
+def _p(x: float | None) -> str:
+    return "–" if x is None else ("< 0.001" if x < 0.001 else f"{x:.3f}")
+
+
+def _pair(test: dict[str, Any] | None) -> str:
+    if test is None or not test["pairs"]:
+        return "–"
+    if test["p"] is None:
+        return f"Δ 0 on all {test['pairs']} pairs"
     return (
-        f"{s.mean(s.returns):.2f} ± {sd:.2f} (n={s.n})"
-        if sd is not None
-        else (f"{s.mean(s.returns):.2f} (n=1)")
+        f"Δ {test['mean_diff']:+.2f}, p {_p(test['p'])} (Holm {_p(test['p_holm'])}), "
+        f"{test['nonzero']} of {test['pairs']} pairs differ"
     )
+
+
+def header(stats: dict[tuple[str, str], CellStats]) -> list[str]:
+    """Model(s), episodes and dates of the cells: every table says what it is of."""
+    models = sorted({s.model for s in stats.values() if s.model})
+    dates = sorted({d for s in stats.values() for d in s.finished if d})
+    ns = sorted({s.n for s in stats.values()})
+    span = f"{dates[0]} to {dates[-1]}" if len(dates) > 1 else (dates[0] if dates else "?")
+    n_text = f"{ns[0]}" if len(ns) == 1 else (f"{ns[0]}–{ns[-1]}" if ns else "0")
+    return [
+        f"Model: {', '.join(models) or 'none (scripted only)'}; episodes per cell n = {n_text}; "
+        f"cells finished {span}. Intervals: 95 % percentile bootstrap of the mean "
+        "(5,000 resamples, fixed seed). p: two-sided exact Wilcoxon signed-rank test against "
+        "AeroWeaver on the same (seed, episode), Holm-adjusted over each condition's tasks; "
+        "with n pairs no p can be below 2 / 2^n (n = 5: 0.0625).",
+        "",
+    ]
 
 
 def _holds(s: CellStats) -> str:
@@ -246,17 +371,69 @@ def markdown(
     tasks = [t for t in tasks if any((t, c) in stats for c in conditions)]
     conds = [c for c in conditions if any((t, c) in stats for t in tasks)]
     titles = [CONDITIONS[c].title for c in conds]
-    out = ["### Episode return (mean ± sample SD over episodes)", ""]
+    out = header({k: v for k, v in stats.items() if k[0] in tasks and k[1] in conds})
+    out += ["### Episode return (mean [95 % bootstrap interval] (n episodes))", ""]
     out += ["| task | " + " | ".join(titles) + " |", "|---" * (len(conds) + 1) + "|"]
     for t in tasks:
         out.append(f"| {t} | " + " | ".join(_ret(stats.get((t, c))) for c in conds) + " |")
-    out += ["", "### Tokens per episode (UAVs' calls + the central node's)", ""]
+    others = [c for c in conds if c != "aeroweaver"]
+    if "aeroweaver" in conds and others:
+        tests = paired_tests(stats, tasks, conds)
+        out += [
+            "",
+            "### Paired against AeroWeaver: mean difference in return (condition − AeroWeaver), "
+            "Wilcoxon p (Holm-adjusted over the condition's tasks)",
+            "",
+            "| task | " + " | ".join(CONDITIONS[c].title for c in others) + " |",
+            "|---" * (len(others) + 1) + "|",
+        ]
+        for t in tasks:
+            out.append(f"| {t} | " + " | ".join(_pair(tests.get((t, c))) for c in others) + " |")
+        row = [_pair(tests.get(("*", c))) for c in others]
+        out.append("| all tasks, Δ / K_t (Holm over conditions) | " + " | ".join(row) + " |")
+    out += [
+        "",
+        "### Position bias: share of picks that took the first option listed "
+        "(decisions with >= 2 options)",
+        "",
+    ]
+    out += ["| task | " + " | ".join(titles) + " |", "|---" * (len(conds) + 1) + "|"]
+    pooled: dict[str, CellStats] = {}
+    for t in tasks:
+        row = []
+        for c in conds:
+            s = stats.get((t, c))
+            if s is not None:
+                pooled.setdefault(c, CellStats("*", c, s.title)).absorb(s)
+            pb = None if s is None else s.position_bias
+            row.append("–" if s is None or pb is None else f"{100 * pb:.0f} % of {s.picks}")
+        out.append(f"| {t} | " + " | ".join(row) + " |")
+    row = []
+    for c in conds:
+        ps = pooled.get(c)
+        pb = None if ps is None else ps.position_bias
+        row.append("–" if ps is None or pb is None else f"**{100 * pb:.1f} % of {ps.picks}**")
+    out.append("| all tasks | " + " | ".join(row) + " |")
+    out += [
+        "",
+        "### Tokens per episode (UAVs' calls + the central node's + one LLM Commander "
+        "setup per run where its activation is used)",
+        "",
+    ]
     out += ["| task | " + " | ".join(titles) + " |", "|---" * (len(conds) + 1) + "|"]
     for t in tasks:
         cells = []
         for c in conds:
             s = stats.get((t, c))
             cells.append(_num(s.mean(s.tokens), 0) if s and s.tokens else "–")
+        out.append(f"| {t} | " + " | ".join(cells) + " |")
+    out += ["", "### Tokens per round (per episode: tokens / rounds flown; mean)", ""]
+    out += ["| task | " + " | ".join(titles) + " |", "|---" * (len(conds) + 1) + "|"]
+    for t in tasks:
+        cells = []
+        for c in conds:
+            s = stats.get((t, c))
+            cells.append(_num(s.mean(s.per_round), 0) if s and s.per_round else "–")
         out.append(f"| {t} | " + " | ".join(cells) + " |")
     if "aeroweaver" in conds and ({"hmas2", "centralized"} & set(conds)):
         out += [
@@ -298,10 +475,10 @@ def markdown(
         "",
         "### Per task and condition",
         "",
-        "| task | condition | episodes | return | tokens / episode (central) | LLM calls / "
-        "episode | decision latency p50 / p95 (s) | uncached prompt tokens / call | "
-        "invalid choices | holds per episode by cause |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| task | condition | episodes | return | tokens / episode (central) | of which "
+        "setup | LLM calls / episode | decision latency p50 / p95 (s) | uncached prompt "
+        "tokens / call | invalid choices | holds per episode by cause |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for t in tasks:
         for c in conds:
@@ -311,8 +488,11 @@ def markdown(
             central = s.mean(s.central_tokens) if any(s.central_tokens) else None
             tok = _num(s.mean(s.tokens), 0) + (f" ({_num(central, 0)})" if central else "")
             inv = s.invalid_rate
+            setup = "–" if c not in SETUP_CONDITIONS else _num(s.mean(s.setup), 0)
+            setup += f" ({s.setup_missing} runs unmeasured)" if s.setup_missing else ""
             out.append(
-                f"| {t} | {s.title} | {s.n} | {_ret(s)} | {tok} | {_num(s.mean(s.calls), 1)} | "
+                f"| {t} | {s.title} | {s.n} | {_ret(s)} | {tok} | {setup} | "
+                f"{_num(s.mean(s.calls), 1)} | "
                 f"{_num(s.percentile(0.5), 2)} / {_num(s.percentile(0.95), 2)} | "
                 f"{_num(s.uncached_per_call, 0)} | "
                 f"{'–' if inv is None else f'{100 * inv:.1f} %'} | {_holds(s)} |"
@@ -357,6 +537,9 @@ CSV_FIELDS = [
     "prompt_central",
     "prompt_cached_central",
     "completion_central",
+    "setup_tokens",
+    "picks",
+    "first_label_picks",
     "latency_p50_s",
     "latency_p95_s",
     "model",
@@ -372,7 +555,8 @@ def csv_rows(cells: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     rows = []
     for data in cells:
         b = data["bench"]
-        for e in data["episodes"]:
+        setup = b.get("setup_tokens") if b["condition"] in SETUP_CONDITIONS else 0
+        for i, e in enumerate(data["episodes"]):
             t = e["tokens"]
             rows.append(
                 {
@@ -396,6 +580,9 @@ def csv_rows(cells: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
                     "prompt_central": t["central"]["prompt"],
                     "prompt_cached_central": t["central"]["prompt_cached"],
                     "completion_central": t["central"]["completion"],
+                    "setup_tokens": (setup if i == 0 else 0),
+                    "picks": e.get("picks", 0),
+                    "first_label_picks": e.get("first_label_picks", 0),
                     "latency_p50_s": _pct(e["latency_s"], 0.5),
                     "latency_p95_s": _pct(e["latency_s"], 0.95),
                     "model": data["summary"].get("model") or data["summary"].get("selector"),
@@ -419,8 +606,15 @@ def summary(
                 continue
             per.setdefault(t, {})[c] = s.figures()
             pooled.setdefault(c, CellStats("*", c, s.title)).absorb(s)
+    tests = paired_tests(stats, tasks, conditions)
     return {
         "cells_finished": sum(len(s.seeds) for s in stats.values()),
+        "paired_vs_aeroweaver": {
+            f"{t}/{c}".replace("*/", "all/"): {
+                k: round(v, 4) if isinstance(v, float) else v for k, v in test.items()
+            }
+            for (t, c), test in tests.items()
+        },
         "by_task": per,
         "by_condition": {c: pooled[c].figures() for c in conditions if c in pooled},
         "token_ratios": {
@@ -451,6 +645,7 @@ __all__ = [
     "csv_rows",
     "load_cells",
     "markdown",
+    "paired_tests",
     "summary",
     "token_ratios",
     "write_report",

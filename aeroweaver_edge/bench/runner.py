@@ -3,13 +3,22 @@
 Every cell (task, condition, seed) is one simulated run of ``--episodes`` consecutive
 episodes (experience memory persists across them) that writes, under ``--out``:
 
-* ``runs/<task>/<condition>/seed<S>.trace.jsonl`` -- the per-round trace (docs/traces.md);
+* ``runs/<task>/<condition>/seed<S>.trace.jsonl.gz`` -- the per-round trace (docs/traces.md),
+  gzip-compressed (mtime 0: the same trace gives the same bytes);
 * ``runs/<task>/<condition>/seed<S>.json`` -- the run summary, the per-episode figures
-  computed from the trace (``bench.episodes``) and a check that they add up to the summary.
+  computed from the trace (``bench.episodes``) and a check that they add up to the summary;
+* ``setup/<task>.json`` -- the tokens of one LLM Commander activation of the task's mission
+  text (``bench.setup_cost``), counted once per run in AeroWeaver's totals.
+
+Every condition lists each UAV's skills, hence its option letters, in one seeded order per
+(task, seed, UAV) (``orchestration.variants.with_seeded_order``): a model that answers ``A``
+gets the same skill under every condition that offers it first.
 
 A cell whose JSON exists and is complete (same configuration) is skipped, so an interrupted
-run resumes with the same command. At the end (and with ``--report-only``) ``results.csv``,
-``table.md``, ``returns.png`` and ``tokens.png`` are written from all complete cells.
+run resumes with the same command. ``--jobs N`` runs N cells at once (default: the physical
+cores; each embedded model server then gets one thread). At the end (and with
+``--report-only``, from the stored cells alone, byte for byte) ``results.csv``, ``table.md``,
+``summary.json``, ``returns.png`` and ``tokens.png`` are written from all complete cells.
 Progress and an ETA go to stderr; the machine's load is recorded at start and end of every
 session in ``manifest.json``.
 
@@ -33,19 +42,22 @@ from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from aeroweaver_edge.bench.conditions import CONDITIONS, Condition, swarm_options
 from aeroweaver_edge.bench.episodes import check_against_summary, episode_metrics, read_trace
+from aeroweaver_edge.bench.setup_cost import SETUP_CONDITIONS, measure_setups
 from aeroweaver_edge.cli_checks import check_api_key_env, check_llm_url, finite, int_in
 from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig, parse_config
 from aeroweaver_edge.errors import RunFailed, UserError
 from aeroweaver_edge.json_out import write_json_file
+from aeroweaver_edge.llm.embedded import THREADS_ENV
 from aeroweaver_edge.llm.embedded import default_threads as embedded_threads
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
-RESULT_VERSION = 1
+RESULT_VERSION = 2  # 2: seeded option order, compressed traces
+OPTION_ORDER: Final = "seeded"
 DEFAULT_LLM_DEADLINE_S = 60.0
 
 
@@ -62,6 +74,7 @@ class Cell:
         return self.stem(out).with_suffix(".json")
 
     def trace_path(self, out: Path) -> Path:
+        """Where the run writes its trace; ``archive_trace`` compresses it when it ends."""
         return self.stem(out).with_suffix(".trace.jsonl")
 
     def __str__(self) -> str:
@@ -82,6 +95,7 @@ def config_key(rounds: int, episodes: int, llm: LLMConfig, source: str) -> dict[
         "episodes": episodes,
         "llm": source,
         "model": llm.model,
+        "option_order": OPTION_ORDER,
     }
 
 
@@ -127,7 +141,8 @@ class Progress:
     """One stderr line per cell with a bar and an ETA from the cells timed so far (per
     condition: a baseline's cell takes several times an AeroWeaver cell)."""
 
-    def __init__(self, total: int, skipped: int) -> None:
+    def __init__(self, total: int, skipped: int, jobs: int = 1) -> None:
+        self.jobs = max(1, jobs)
         self.total = total
         self.done = skipped
         self.started = time.monotonic()
@@ -142,7 +157,7 @@ class Progress:
         for c in remaining:
             ts = self.times.get(c.condition)
             est += sum(ts) / len(ts) if ts else overall
-        return est
+        return est / self.jobs
 
     def line(self, cell: Cell, seconds: float, outcome: str, remaining: Sequence[Cell]) -> str:
         self.done += 1
@@ -190,22 +205,32 @@ async def run_cell(
     trace.parent.mkdir(parents=True, exist_ok=True)
     load_before = _load()
     started = time.monotonic()
-    with tempfile.TemporaryDirectory(prefix="aw-bench-mem-") as mem:
-        opts = swarm_options(
-            cond,
-            task=cell.task,
-            seed=cell.seed,
-            episodes=args.episodes,
-            rounds=args.rounds,
-            llm=llm,
-            deadline_s=args.deadline,
-            trace_path=trace,
-            memory_dir=Path(mem),
-        )
-        opts = dataclasses.replace(opts, require_llm_answer=True)  # holds only: no result
-        summary = (await run_swarm(opts)).as_dict()
-    wall = time.monotonic() - started
-    episodes = episode_metrics(read_trace(trace))
+    plain = trace
+    try:
+        with tempfile.TemporaryDirectory(prefix="aw-bench-mem-") as mem:
+            opts = swarm_options(
+                cond,
+                task=cell.task,
+                seed=cell.seed,
+                episodes=args.episodes,
+                rounds=args.rounds,
+                llm=llm,
+                deadline_s=args.deadline,
+                trace_path=trace,
+                memory_dir=Path(mem),
+            )
+            # holds only: no result; option letters in the seeded order all conditions share
+            opts = dataclasses.replace(opts, require_llm_answer=True, option_order=OPTION_ORDER)
+            summary = (await run_swarm(opts)).as_dict()
+        wall = time.monotonic() - started
+        # off the loop: other cells' daemons share it
+        episodes = episode_metrics(await asyncio.to_thread(read_trace, trace))
+        trace = await asyncio.to_thread(archive_trace, trace)
+    except asyncio.CancelledError:
+        # half a cell is no result: its plain trace goes, a resume reruns it (a .gz that a
+        # stop left without its JSON is read by no report and overwritten by the rerun)
+        plain.unlink(missing_ok=True)
+        raise
     unusable = llm_failure_problem(episodes)
     data = {
         "bench": {
@@ -222,6 +247,9 @@ async def run_cell(
             "load_after": _load(),
             "trace": str(trace.relative_to(out)),
             "trace_check": check_against_summary(episodes, summary),
+            # one LLM Commander activation of this task on this endpoint (bench.setup_cost):
+            # counted once per run in the totals of the conditions that use the activation
+            "setup_tokens": _setup_tokens(out, cell),
             # the embedded server's llama.cpp threads: speed only, not the answers' source
             "llm_threads": embedded_threads() if key["llm"] == "embedded" else None,
             "complete": unusable is None,
@@ -234,6 +262,55 @@ async def run_cell(
     if unusable is not None:
         raise CellUnusable(unusable)
     return data
+
+
+def _setup_tokens(out: Path, cell: Cell) -> int | None:
+    from aeroweaver_edge.bench.setup_cost import load_setup
+
+    if cell.condition not in SETUP_CONDITIONS:
+        return 0
+    setup = load_setup(out, cell.task)
+    value = None if setup is None else setup.get("setup_tokens")
+    return value if isinstance(value, int) else None
+
+
+def archive_trace(path: Path) -> Path:
+    """``path`` gzip-compressed beside it (level 9, no name or time in the header, so the
+    same trace is the same bytes), the plain file removed; returns the ``.gz`` path."""
+    import gzip
+
+    gz = path.with_name(path.name + ".gz")
+    tmp = gz.with_name(gz.name + ".part")
+    with (
+        path.open("rb") as src,
+        tmp.open("wb") as raw,
+        gzip.GzipFile(filename="", mode="wb", compresslevel=9, fileobj=raw, mtime=0) as z,
+    ):
+        z.write(src.read())
+    tmp.replace(gz)
+    path.unlink(missing_ok=True)  # a stopped cell may have removed it meanwhile
+    return gz
+
+
+def physical_cores() -> int:
+    """Physical cores this process may use: distinct (package, core) pairs in
+    ``/proc/cpuinfo`` (hyper-threads share a core's FMA units), capped by the usable CPUs
+    (affinity mask and CPU quota, ``llm.cpus``); the usable CPUs where cpuinfo says nothing."""
+    from aeroweaver_edge.llm.cpus import usable_cpus
+
+    usable = usable_cpus()
+    try:
+        text = Path("/proc/cpuinfo").read_text(encoding="ascii", errors="replace")
+    except OSError:
+        return usable
+    cores: set[tuple[str, str]] = set()
+    for block in text.split("\n\n"):
+        fields = dict(
+            (k.strip(), v.strip()) for k, _, v in (ln.partition(":") for ln in block.splitlines())
+        )
+        if "core id" in fields:
+            cores.add((fields.get("physical id", "0"), fields["core id"]))
+    return max(1, min(usable, len(cores))) if cores else usable
 
 
 class CellUnusable(Exception):
@@ -286,12 +363,14 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
         ]
         if source != "embedded" and any(CONDITIONS[c.condition].selector == "llm" for c in todo):
             await preflight(llm)  # before any cell: hours of holds are no benchmark
+        jobs = max(1, min(args.jobs, len(todo) or 1))
         session: dict[str, Any] = {
             "command": "aeroweaver bench run " + " ".join(shlex.quote(a) for a in args.argv),
             "started": datetime.now(UTC).isoformat(timespec="seconds"),
             "load_start": _load(),
             "machine": {
                 "cpus": os.cpu_count(),
+                "physical_cores": physical_cores(),
                 "platform": platform.platform(),
                 "python": platform.python_version(),
             },
@@ -299,47 +378,28 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
             "model": llm.model,
             "llm_threads": embedded_threads() if source == "embedded" else None,
             "llm_deadline_s": llm.deadline_s,
+            "jobs": jobs,
             "cells_planned": len(cells),
             "cells_skipped": len(cells) - len(todo),
         }
-        progress = Progress(len(cells), len(cells) - len(todo))
+        progress = Progress(len(cells), len(cells) - len(todo), jobs)
         print(
             f"bench: {len(cells)} cells, {len(cells) - len(todo)} already done, "
-            f"{len(todo)} to run; LLM: {source} ({llm.model}); results in {out}",
+            f"{len(todo)} to run, {jobs} at a time; LLM: {source} ({llm.model}); "
+            f"results in {out}",
             file=sys.stderr,
             flush=True,
         )
-        ran = 0
-        unusable_in_a_row = 0
+        ran: list[Cell] = []  # filled as cells finish: an interrupted session counts them too
         try:
-            for i, cell in enumerate(todo):
-                t0 = time.monotonic()
-                try:
-                    data = await run_cell(cell, args, llm, key)
-                    outcome = _outcome(data)
-                    ran += 1
-                    unusable_in_a_row = 0
-                except (asyncio.CancelledError, KeyboardInterrupt, UserError):
-                    raise  # a user error (e.g. the endpoint stopped answering) stops the run
-                except Exception as exc:  # one cell failing must not lose the others
-                    from aeroweaver_edge.cli_errors import one_line
-
-                    outcome = f"FAILED: {one_line(f'{type(exc).__name__}: {exc}')[:300]}"
-                    failures.append(f"{cell}: {outcome}")
-                    unusable = isinstance(exc, CellUnusable)
-                    unusable_in_a_row = unusable_in_a_row + 1 if unusable else 0
-                line = progress.line(cell, time.monotonic() - t0, outcome, todo[i + 1 :])
-                print(line, file=sys.stderr, flush=True)
-                if unusable_in_a_row >= 2:
-                    raise RunFailed(
-                        f"the LLM failed most decisions of {unusable_in_a_row} cells in a row "
-                        f"(last: {cell}); fix the endpoint, then rerun the same command to resume"
-                    )
+            if any(c.condition in SETUP_CONDITIONS for c in cells) and source != "scripted":
+                await measure_setups(out, sorted({c.task for c in cells}), llm, source)
+            await _run_cells(args, todo, llm, key, jobs, progress, failures, ran)
         finally:
             session.update(
                 finished=datetime.now(UTC).isoformat(timespec="seconds"),
                 load_end=_load(),
-                cells_run=ran,
+                cells_run=len(ran),
                 failures=failures,
             )
             _record_session(out, session)
@@ -356,6 +416,65 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
             print(f"  {f}", file=sys.stderr)
         return 1
     return 0
+
+
+async def _run_cells(
+    args: argparse.Namespace,
+    todo: list[Cell],
+    llm: LLMConfig,
+    key: dict[str, Any],
+    jobs: int,
+    progress: Progress,
+    failures: list[str],
+    ran: list[Cell],
+) -> None:
+    """``todo`` with up to ``jobs`` cells running at once: a worker takes the next cell as
+    soon as its last one ends, so no core waits for the slowest cell of a batch. Cells that
+    ran to a result are appended to ``ran``. Two unusable cells in a row (in finishing
+    order) stop all."""
+    queue = list(todo)
+    unusable_in_a_row = 0
+    stop: BaseException | None = None
+
+    async def worker() -> None:
+        nonlocal unusable_in_a_row, stop
+        while queue and stop is None:
+            cell = queue.pop(0)
+            t0 = time.monotonic()
+            try:
+                data = await run_cell(cell, args, llm, key)
+                outcome = _outcome(data)
+                ran.append(cell)
+                unusable_in_a_row = 0
+            except (asyncio.CancelledError, KeyboardInterrupt):
+                raise
+            except UserError as exc:  # e.g. the endpoint stopped answering: stop the run
+                stop = stop or exc
+                return
+            except Exception as exc:  # one cell failing must not lose the others
+                from aeroweaver_edge.cli_errors import one_line
+
+                outcome = f"FAILED: {one_line(f'{type(exc).__name__}: {exc}')[:300]}"
+                failures.append(f"{cell}: {outcome}")
+                unusable = isinstance(exc, CellUnusable)
+                unusable_in_a_row = unusable_in_a_row + 1 if unusable else 0
+            line = progress.line(cell, time.monotonic() - t0, outcome, queue)
+            print(line, file=sys.stderr, flush=True)
+            if unusable_in_a_row >= 2 and stop is None:
+                stop = RunFailed(
+                    f"the LLM failed most decisions of {unusable_in_a_row} cells in a row "
+                    f"(last: {cell}); fix the endpoint, then rerun the same command to resume"
+                )
+
+    workers = [asyncio.create_task(worker(), name=f"bench-job-{i}") for i in range(jobs)]
+    try:
+        await asyncio.gather(*workers)
+    finally:
+        for w in workers:
+            w.cancel()
+        await asyncio.gather(*workers, return_exceptions=True)
+    if stop is not None:
+        raise stop
 
 
 async def preflight(llm: LLMConfig) -> None:
@@ -426,6 +545,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds per round (default: from the LLM deadline and the "
         "condition's sequential calls)",
     )
+    p.add_argument(
+        "--jobs",
+        type=int_in(1, 256),
+        default=None,
+        help="cells run at once (default: the physical cores; with the embedded model each "
+        "cell's server then gets one thread)",
+    )
     p.add_argument("--out", default="bench-results", help="output directory")
     p.add_argument(
         "--quick",
@@ -474,6 +600,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         ) from None
     if not os.access(out, os.W_OK):
         raise UserError(f"--out {out} is not writable", "give --out a writable directory")
+    if args.jobs is None:
+        args.jobs = physical_cores()
+    if args.jobs > 1 and not args.llm and not args.quick:
+        # one model server per job: one thread each beats two threads on one server under
+        # load (docs/performance.md); an explicit AEROWEAVER_LLM_THREADS is kept
+        os.environ.setdefault(THREADS_ENV, "1")
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     cells = plan_cells(args.tasks, args.conditions, seeds)
     return asyncio.run(_cancellable(run_all(args, cells)))

@@ -224,6 +224,8 @@ async def start_mission(
                 current.uncancel()
         finally:
             commander.end_mission(str(out["ended"]))
+            if not opts.sim_world and commander.board.uavs:  # the field's one episode
+                out["episodes"].append(field_episode(commander.board, str(out["ended"])))
             out["progress"] = {
                 u: progress_row(p)
                 for u, p in sorted(commander.board.uavs.items(), key=lambda kv: natural(kv[0]))
@@ -233,6 +235,36 @@ async def start_mission(
             await asyncio.sleep(0.2)  # let the ended context leave before the session closes
     out["wall_s"] = round(time.monotonic() - started, 3)
     return out
+
+
+def field_episode(board: ProgressBoard, reason: str) -> dict[str, Any]:
+    """A field mission's one episode, from the UAVs' own round reports (no world scores
+    it): rounds, holds by cause, decision tokens and, where the daemons' reward source gave
+    rewards, returns (``None`` otherwise: the field's ``NoRewards``)."""
+    uavs = sorted(board.uavs.values(), key=lambda p: natural(p.uav))
+    returns = {p.uav: (p.reward_sum if p.rewarded else None) for p in uavs}
+    scored = [r for r in returns.values() if r is not None]
+    causes: dict[str, int] = {}
+    for p in uavs:
+        for cause, n in p.holds_by_cause.items():
+            causes[cause] = causes.get(cause, 0) + n
+    return {
+        "episode": 0,
+        "rounds": max((p.reports for p in uavs), default=0),
+        "reason": reason,
+        "team_return": sum(scored) / len(scored) if scored else None,
+        "agent_returns": returns,
+        "source": "field: the UAVs' round reports",
+        "decisions": sum(p.reports for p in uavs),
+        "holds": sum(p.holds for p in uavs),
+        "holds_by_cause": causes,
+        "tokens": {
+            "prompt": sum(p.prompt_tokens for p in uavs),
+            "prompt_cached": sum(p.prompt_cached for p in uavs),
+            "completion": sum(p.completion_tokens for p in uavs),
+        },
+        "llm_calls": sum(p.llm_calls for p in uavs),
+    }
 
 
 def _contact_fields(contact: ContactWatch, runner: WorldRunner | None) -> dict[str, Any]:

@@ -49,7 +49,12 @@ from aeroweaver_edge.orchestration.network import free_port as free_port
 from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
 from aeroweaver_edge.orchestration.run_health import health_fields, security_fields
 from aeroweaver_edge.orchestration.trace import TraceRecorder
-from aeroweaver_edge.orchestration.variants import WIDE_SLOT_CTX, add_central, with_full_catalogue
+from aeroweaver_edge.orchestration.variants import (
+    WIDE_SLOT_CTX,
+    add_central,
+    with_full_catalogue,
+    with_seeded_order,
+)
 from aeroweaver_edge.run_dir import RunDir, sweep_stale
 from aeroweaver_edge.security.identity import CENTRAL, COMMANDER, WORLD
 from aeroweaver_edge.security.wiring import boot_headers
@@ -98,6 +103,10 @@ class SwarmOptions:
     baseline: Literal["none", "centralized", "hmas2"] = "none"
     activation: Literal["topk", "full"] = "topk"
     coordination: bool = True
+    # Option letters: "activation" (the Commander's order, the alphabet for the full
+    # catalogue; sim and field) or "seeded" (the benchmark: a seeded order per task, seed and
+    # UAV shared by every condition, orchestration.variants.with_seeded_order).
+    option_order: Literal["activation", "seeded"] = "activation"
     central_gather_s: float = 3.0  # the central node waits this long for a round's asks
     finalised_only: bool = False  # AgentConfig.finalised_only (retrieval of ended episodes)
     pace_s: float = 0.0  # wall-clock floor per round (the console: watchable scripted runs)
@@ -291,6 +300,7 @@ def _trace_header(summary: RunSummary, opts: SwarmOptions, cfg: SimConfig) -> di
         "roles": summary.roles,
         "mission": summary.mission,
         "beta": opts.beta,
+        "option_order": opts.option_order,
         "round_s": cfg.round_s,
         "max_rounds": cfg.max_rounds,
         "arena_half_m": d.ARENA_HALF_M,
@@ -377,6 +387,8 @@ async def run_swarm(
             )
         if opts.activation == "full":
             plan = with_full_catalogue(plan)
+        if opts.option_order == "seeded":
+            plan = with_seeded_order(plan, opts.seed)
         if on_plan is not None:  # the terminal shows who flies what before it flies
             on_plan(plan)
         task = world_task(plan, opts.max_rounds)

@@ -2,6 +2,9 @@
 
 * ``with_full_catalogue``: every UAV gets the whole task-skill catalogue (the baselines and
   the "without skill activation" ablation): no role filter, no top-K.
+* ``with_seeded_order``: each UAV's skills in a seeded order per (task, seed, UAV) that every
+  condition shares for the skills they have in common, so option labels (A, B, ...) do not
+  follow the alphabet under one condition and the activation rank under another.
 * ``add_central``: a baseline's central-node tokens and calls join the run's totals, with
   the split kept in ``tokens_by_side`` (the UAVs' own calls vs the central node's).
 * ``WIDE_SLOT_CTX``: the embedded server's context per cache slot when prompts carry all
@@ -35,6 +38,21 @@ def with_full_catalogue(plan: MissionPlan) -> MissionPlan:
     )
 
 
+def with_seeded_order(plan: MissionPlan, seed: int) -> MissionPlan:
+    """Every UAV's skill list (hence its option letters) in the order of
+    ``agent.candidates.seeded_order`` keyed by (task, seed, UAV); the plan is recorded in the
+    trace header, and each decision's lettered options in its round line."""
+    from aeroweaver_edge.agent.candidates import seeded_order
+
+    return replace(
+        plan,
+        assignments={
+            u: replace(a, skills=tuple(seeded_order(a.skills, f"{plan.task}|{seed}|{u}")))
+            for u, a in plan.assignments.items()
+        },
+    )
+
+
 def add_central(summary: RunSummary, central: dict[str, Any]) -> None:
     """Fold the central node's tokens and calls into ``summary`` (totals and per episode)."""
     uav_side = dict(summary.tokens)
@@ -55,4 +73,4 @@ def add_central(summary: RunSummary, central: dict[str, Any]) -> None:
         e["tokens"] += central["by_episode"].get(str(e["episode"]), {}).get("tokens", 0)
 
 
-__all__ = ["WIDE_SLOT_CTX", "add_central", "with_full_catalogue"]
+__all__ = ["WIDE_SLOT_CTX", "add_central", "with_full_catalogue", "with_seeded_order"]

@@ -34,12 +34,14 @@ pytestmark = pytest.mark.slow
 
 def test_secured_daemons_fly_two_missions_in_a_row(tmp_path: Path) -> None:
     swarm, keys = "sec", tmp_path / "keys"
-    router = f"tls/127.0.0.1:{free_port()}"
+    port = free_port()  # the router's; uavN listens on port + 1 + N (keys init --loopback)
+    router = f"tls/127.0.0.1:{port}"
     assert main(["keys", "init", "--swarm", swarm, "--uavs", "3", "--out", str(keys),
-                 "--listen", router, "--connect", router, "--mode", "client"]) == 0  # fmt: skip
-    for uav in UAVS:  # scripted, so no LLM is needed
+                 "--loopback", "--port", str(port), "--vehicle", "sim",
+                 "--selector", "scripted", "--mode", "client"]) == 0  # fmt: skip
+    for uav in UAVS:  # scripted and uncorrected, so no LLM is needed and picks are fixed
         toml = keys / uav / "uav.toml"
-        toml.write_text(toml.read_text() + '\n[agent]\nselector = "scripted"\nbeta = 0.0\n')
+        toml.write_text(re.sub(r"(?m)^beta = .*$", "beta = 0.0", toml.read_text()))
     procs = Procs(tmp_path)
     try:
         procs.start("router", "router", "--config", str(keys / "router" / "zenoh.json5"))

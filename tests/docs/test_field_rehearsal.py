@@ -174,9 +174,13 @@ def test_the_rehearsal_in_docs_field_md_flies(tmp_path: Path) -> None:
         security = record["security"]
         assert isinstance(security, dict)
         assert (security["tls"], security["acl"], security["signed"]) == (True, True, True)
-        # TODO(lead): a field mission's record has "episodes": [] (orchestration/mission.py
-        # fills episodes only with --sim-world: no world, no rewards); assert
-        # record["episodes"] once field missions record one.
+        # one field episode, from the UAVs' own round reports (no world scores it)
+        (episode,) = record["episodes"]  # type: ignore[misc]
+        assert episode["reason"] == "horizon", episode
+        assert episode["rounds"] >= 24, episode
+        assert episode["decisions"] >= 3 * 24, episode
+        assert set(episode["agent_returns"]) == {"uav0", "uav1", "uav2"}
+        assert sum(episode["holds_by_cause"].values()) == episode["holds"]
     ids = [r["mission"]["mission_id"] for r in records]  # type: ignore[index]
     assert len(set(ids)) == 2, ids  # two missions, two ids, on the same daemons
     # and the emulated vehicles were really there (the emulator's own status lines)

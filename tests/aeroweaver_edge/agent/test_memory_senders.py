@@ -10,7 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from aeroweaver_edge.agent import memory as memory_module
 from aeroweaver_edge.agent import memory_tools
+from aeroweaver_edge.agent.estimators import Estimator
 from aeroweaver_edge.agent.memory import ExperienceMemory
 from aeroweaver_edge.agent.shared_intake import SharedIntake
 from aeroweaver_edge.cli import main
@@ -76,8 +78,19 @@ def test_bytes_per_sender_are_capped_too(tmp_path: Path) -> None:
     m.close()
 
 
-def test_evicted_records_leave_the_neighbourhood(tmp_path: Path) -> None:
-    m = ExperienceMemory(tmp_path / "m.sqlite3", max_records_per_sender=5, neighbourhood=8)
+@pytest.mark.parametrize("small_group", [2048, 0], ids=["python", "numpy"])
+@pytest.mark.parametrize("estimator", ["paper", "horizon:3", "horizon:3,centre"])
+def test_evicted_records_leave_the_neighbourhood(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, estimator: str, small_group: int
+) -> None:
+    """Under every estimator and both selection paths: the horizon estimators keep their
+    own per-record book, and an evicted position must not stay eligible through it. (No
+    share cap here: it would hide the evicted records behind the sender's newest ones.)"""
+    monkeypatch.setattr(memory_module, "SMALL_GROUP", small_group)
+    m = ExperienceMemory(
+        tmp_path / "m.sqlite3", max_records_per_sender=5, neighbourhood=8,
+        max_sender_share=1.0, estimator=Estimator.parse(estimator),
+    )  # fmt: skip
     own(m, 0, "landmark l1 near", "hold_position", 0.0)
     m.warm(T, R)  # the index exists before the flood: eviction keeps it in step
     for i in range(40):

@@ -100,3 +100,65 @@ def test_hmas2_reviews_and_revisions_are_counted_and_tabled() -> None:
     )
     table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
     assert "| coverage | 1 | 3 of 6 | 1 of 4 |" in table
+
+
+def test_paired_tests_position_bias_and_setup_tokens_in_the_table() -> None:
+    from aeroweaver_edge.bench.report import markdown, paired_tests
+
+    cells = []
+    for seed in range(1, 11):
+        a = cell("coverage", "aeroweaver", seed, [float(seed)], 100)
+        a["bench"]["setup_tokens"] = 2500  # one Commander activation per run
+        for e in a["episodes"]:
+            e["picks"], e["first_label_picks"] = 4, 3
+        cells.append(a)
+        # Centralized: 1 lower on every seed; beta0 identical to AeroWeaver
+        cells.append(cell("coverage", "centralized", seed, [seed - 1.0], 400))
+        b = cell("coverage", "beta0", seed, [float(seed)], 100)
+        b["bench"]["setup_tokens"] = 2500
+        cells.append(b)
+    stats = aggregate(cells)
+    tests = paired_tests(stats, ["coverage"], ["aeroweaver", "centralized", "beta0"])
+    cen = tests[("coverage", "centralized")]
+    assert (cen["pairs"], cen["nonzero"], cen["mean_diff"]) == (10, 10, -1.0)
+    assert cen["p"] == pytest.approx(2 / 1024)
+    assert cen["p_holm"] == pytest.approx(2 / 1024)  # Centralized's family: one task
+    assert tests[("coverage", "beta0")]["p"] is None  # nothing differs: nothing to test
+    pooled = tests[("*", "centralized")]  # all tasks, each difference / K_t
+    assert pooled["mean_diff"] == pytest.approx(-1 / 17.077)
+    assert pooled["p_holm"] == pytest.approx(2 / 1024)  # beta0 has no p: a family of one
+    s = stats[("coverage", "aeroweaver")]
+    assert s.tokens == [2600] * 10
+    assert s.setup == [2500] * 10
+    assert s.per_round == [1300.0] * 10
+    assert s.position_bias == 0.75
+    md = markdown(stats, ["coverage"], ["aeroweaver", "centralized", "beta0"])
+    assert "n = 10" in md
+    assert "Model: m" in md
+    assert "Δ -1.00, p 0.002 (Holm 0.002), 10 of 10 pairs differ" in md
+    assert "Δ 0 on all 10 pairs" in md
+    assert "| all tasks, Δ / K_t (Holm over conditions) | Δ -0.06, p 0.002" in md
+    assert "| coverage | 75 % of 40 |" in md
+    assert "| coverage | 2,600 | 400 | 2,600 |" in md  # tokens per episode, setup included
+    assert "| coverage | 0.26 | – |" not in md
+    assert "AeroWeaver / Centralized" in md
+    assert "| coverage | – | 6.50 |" in md  # 2,600 / 400, setup counted in AeroWeaver's
+
+
+def test_holm_families_are_per_condition_so_n10_can_reject() -> None:
+    """Nine tasks, AeroWeaver higher by 1 on every seed of every task under one ablation:
+    each raw p is 2/1024, Holm over the condition's nine tasks gives 9 x 2/1024 < 0.05 (over
+    the whole table it could not: 54 x 2/1024 > 0.05)."""
+    from aeroweaver_edge.bench.report import PAPER_K, paired_tests
+
+    cells = []
+    for t in PAPER_K:
+        for seed in range(1, 11):
+            cells.append(cell(t, "aeroweaver", seed, [float(seed)], 100))
+            cells.append(cell(t, "no_coordination", seed, [seed - 1.0], 100))
+    tests = paired_tests(aggregate(cells), list(PAPER_K), ["aeroweaver", "no_coordination"])
+    for t in PAPER_K:
+        assert tests[(t, "no_coordination")]["p"] == pytest.approx(2 / 1024)
+        assert tests[(t, "no_coordination")]["p_holm"] == pytest.approx(9 * 2 / 1024)
+    assert tests[("*", "no_coordination")]["pairs"] == 90
+    assert tests[("*", "no_coordination")]["p"] < 1e-20

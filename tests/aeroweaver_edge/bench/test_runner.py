@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.bench.report import aggregate, markdown
 from aeroweaver_edge.bench.runner import Cell, plan_cells
 from aeroweaver_edge.cli import main
@@ -45,18 +46,42 @@ def test_quick_run_writes_cells_tables_and_resumes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "bench"
-    assert quick(out) == 0
+    assert quick(out, "--jobs", "2") == 0
     err = capsys.readouterr().err
-    assert "3 cells, 0 already done, 3 to run" in err
+    assert "3 cells, 0 already done, 3 to run, 2 at a time" in err
     assert "ETA" in err
+    setup = json.loads((out / "setup" / "coverage.json").read_text())
+    assert setup["setup_tokens"] > 0  # the LLM Commander's parse + roles calls, measured
+    orders = {}
     for c in CONDS:
         data = json.loads((out / "runs" / "coverage" / c / "seed1.json").read_text())
         assert data["bench"]["complete"]
         assert data["bench"]["trace_check"] == []
         assert data["bench"]["llm_threads"] is None  # the fake provider: no embedded server
         assert data["bench"]["config"]["rounds"] == 2
-        assert (out / data["bench"]["trace"]).is_file()
+        assert data["bench"]["config"]["option_order"] == "seeded"
+        assert data["bench"]["setup_tokens"] == (setup["setup_tokens"] if c == "aeroweaver" else 0)
+        trace = out / data["bench"]["trace"]
+        assert trace.name == "seed1.trace.jsonl.gz"
+        assert trace.is_file()
+        assert not (out / "runs" / "coverage" / c / "seed1.trace.jsonl").exists()
         assert [e["rounds"] for e in data["episodes"]] == [2]
+        assert episode_metrics(read_trace(trace)) == data["episodes"]  # recomputable
+        lines = read_trace(trace)
+        head = lines[0]
+        assert head["option_order"] == "seeded"
+        for row in lines:  # each pick is the option its letter names in the recorded order
+            for uav, d in row.get("decisions", {}).items():
+                if d.get("label") is not None and d.get("options"):
+                    assert f"{d['label']}. {d['invocation']}" in d["options"]
+                    skills = head["mission"]["assignments"][uav]["skills"]
+                    listed = [o.split(". ", 1)[1].split("(")[0] for o in d["options"]]
+                    assert listed == sorted(listed, key=skills.index)  # the plan's order
+        orders[c] = head["mission"]["assignments"]["uav0"]["skills"]
+    # the skills AeroWeaver and Centralized share are listed in the same relative order
+    shared = [s for s in orders["centralized"] if s in orders["aeroweaver"]]
+    assert shared == [s for s in orders["aeroweaver"] if s in shared]
+    assert len(shared) >= 2
     rows = (out / "results.csv").read_text().splitlines()
     assert len(rows) == 1 + 3
     assert rows[0].startswith("task,condition,seed,episode,team_return")
@@ -68,6 +93,16 @@ def test_quick_run_writes_cells_tables_and_resumes(
     assert manifest["sessions"][0]["cells_run"] == 3
     assert manifest["sessions"][0]["load_start"]
     assert manifest["sessions"][0]["llm_threads"] is None
+    assert manifest["sessions"][0]["jobs"] == 2
+
+    # --report-only rebuilds every table and plot from the cells alone, byte for byte
+    outputs = ["table.md", "results.csv", "summary.json", "returns.png", "tokens.png"]
+    before = {name: (out / name).read_bytes() for name in outputs}
+    for name in outputs:
+        (out / name).unlink()
+    assert main(["bench", "run", "--tasks", "coverage", "--out", str(out), "--report-only"]) == 0
+    assert {name: (out / name).read_bytes() for name in outputs} == before
+    capsys.readouterr()
 
     # resume: nothing to run; a damaged cell is run again, the others are kept
     cell = out / "runs" / "coverage" / "centralized" / "seed1.json"
@@ -130,7 +165,8 @@ def test_tables_from_episode_figures() -> None:
     assert s.percentile(0.5) == 0.3
     assert s.uncached_per_call == 400 / 8
     md = markdown(stats, ["coverage"], ["aeroweaver", "hmas2", "no_activation"])
-    assert "| coverage | -12.00 ± 2.83 (n=2) | -20.00 (n=1) | -29.08 (n=1) |" in md
+    # mean [95 % bootstrap interval]: two episodes resample to means of -14, -12 or -10
+    assert "| coverage | -12.00 [-14.00, -10.00] (n=2) | -20.00 (n=1) | -29.08 (n=1) |" in md
     assert "| coverage | 0.20 | – |" in md  # tokens 200 / 1000; no centralized cell
     assert "| coverage | 0.000 |" in md  # Q = 1 + (-29.077 + 12) / 17.077 (the paper's K_t)
 
@@ -255,3 +291,67 @@ def test_an_endpoint_that_cannot_answer_is_named_before_any_cell(
     assert f"did not answer the start-up probe [{kind}]" in err
     assert chat_calls <= 4  # the probe (and its retries), never a cell's rounds
     assert not list(out.rglob("*.json"))
+
+
+@pytest.mark.parametrize(
+    ("jobs", "says"), [("0", "0 is out of range (1..256)"), ("two", "'two' is not a whole number")]
+)
+def test_a_bad_jobs_count_is_one_line(
+    jobs: str, says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["bench", "run", "--quick", "--jobs", jobs, "--out", str(tmp_path / "b")])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument --jobs: {says}" in err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "b").exists()
+
+
+def test_default_jobs_are_the_physical_cores_this_process_may_use() -> None:
+    from aeroweaver_edge.bench.runner import physical_cores
+    from aeroweaver_edge.llm.cpus import usable_cpus
+
+    assert 1 <= physical_cores() <= usable_cpus()
+
+
+def test_a_stopped_run_records_the_cells_it_finished_and_resumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """SIGTERM mid-run: the session in manifest.json counts the cells that finished (also
+    with two running at once), and the same command runs only the rest."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "bench"
+    argv = [sys.executable, "-m", "aeroweaver_edge.cli", "bench", "run", "--quick"]
+    argv += ["--tasks", "coverage", "line_formation", "--jobs", "2", "--out", str(out)]
+    proc = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    try:
+        deadline = time.monotonic() + 240
+        while not list(out.glob("runs/*/*/seed1.json")) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        assert proc.stderr is not None
+        proc.stderr.close()
+    assert proc.returncode != 0
+    done = [
+        p for p in out.glob("runs/*/*/seed1.json") if json.loads(p.read_text())["bench"]["complete"]
+    ]
+    assert done
+    session = json.loads((out / "manifest.json").read_text())["sessions"][-1]
+    assert session["cells_run"] == len(done)
+    assert session["jobs"] == 2
+    assert not list(out.glob("runs/*/*/*.trace.jsonl"))  # every kept trace is archived
+    # the same command runs only the rest
+    assert main(argv[3:]) == 0
+    err = capsys.readouterr().err
+    assert f"14 cells, {len(done)} already done, {14 - len(done)} to run" in err

@@ -175,8 +175,16 @@ async def test_field_mode_watches_until_every_uav_reported_its_rounds(
         await runner.aclose()
         await world_mesh.aclose()
     assert out["ended"] == "horizon"
-    assert out["episodes"] == []  # the Commander flew nothing
     assert out["mission"]["task"] == "coverage"  # type: ignore[index]
     progress = out["progress"]
     assert isinstance(progress, dict)
     assert all(row["reports"] >= 2 for row in progress.values())
+    # The Commander flew nothing: its one field episode is what the UAVs reported.
+    [episode] = out["episodes"]  # type: ignore[misc]
+    assert episode["source"] == "field: the UAVs' round reports"
+    assert episode["reason"] == "horizon"
+    assert episode["decisions"] == sum(row["reports"] for row in progress.values())
+    assert episode["rounds"] == max(row["reports"] for row in progress.values())
+    assert sum(episode["holds_by_cause"].values()) == episode["holds"]
+    # this stand-in world scores the rounds, so every UAV has a return (the field has none)
+    assert all(isinstance(r, float) for r in episode["agent_returns"].values()), episode
