@@ -983,6 +983,10 @@ class ExperienceMemory:
             i = group.pos.get(key) if group is not None else None
             if group is not None and i is not None:
                 group.ret[i] = ret
+        group = self._groups.get((record.task, record.role))
+        if group is not None and group.book is not None:  # r_t came with the record itself
+            for u, r in rewards[:-1] if record.reward is not None else rewards:
+                group.book.reward((record.run, record.uav, record.episode, u), r)
         return len(done)
 
     def _sender_usage(self, origin: str) -> list[int]:

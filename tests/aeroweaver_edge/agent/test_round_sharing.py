@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import msgspec
 
+from aeroweaver_edge.agent.estimators import Estimator
 from aeroweaver_edge.agent.memory import AsyncExperienceMemory, ExperienceMemory, StoredRecord
 from aeroweaver_edge.agent.round_sharing import BATCH_BYTES, RoundSharing
 from aeroweaver_edge.agent.shared_intake import SharedIntake
@@ -208,3 +209,29 @@ def test_a_served_batch_fits_one_payload() -> None:
     assert 0 < len(batch.records) <= MAX_BATCH_RECORDS
     assert len(msgspec.msgpack.encode(batch)) <= BATCH_BYTES + 4096
     assert batch.records[-1].round == MAX_BATCH_RECORDS + 9  # the newest are served
+
+
+async def test_held_rewards_reach_an_equal_horizon_estimators_book(tmp_path: Path) -> None:
+    """horizon:3 counts the rewards after a record: a peer's record of round 0, followed by
+    held rounds 1-2 and a record of round 3, has 4 (eligible) only if the held ones came."""
+    sender = own_memory()
+    books = RoundSharing(cast(Any, None), KEYS, "uav0", HeaderFactory("uav0"),
+                         SharedIntake("uav0"), 0.9)  # fmt: skip
+    receiver = await AsyncExperienceMemory.open(
+        tmp_path / "uav1.db", gamma=0.9, run=RUN, estimator=Estimator.parse("horizon:3")
+    )
+    intake = SharedIntake("uav1")
+    headers = HeaderFactory("uav0")
+    text = "task coverage role searcher landmark L0 near"
+    await receiver.warm("coverage", "searcher")  # the group and its book exist first
+    for t in range(4):
+        play_one(sender, t, decide=t in (0, 3))
+        books.note_reward(0, t, reward(t))
+        if t in (0, 3):
+            wire = published(sender, "uav0", t, headers)
+            wire = msgspec.structs.replace(wire, held_rewards=books.held_rewards(0, t))
+            intake.offer(KEYS.experience("uav0"), wire, "searcher")
+            await intake.store(receiver)
+    found = await receiver.neighbourhood_of("coverage", "searcher", text)
+    await receiver.aclose()
+    assert [n.key[2] for n in found] == [0]  # round 0 eligible: r0..r3 are known
