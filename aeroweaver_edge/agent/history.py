@@ -2,7 +2,10 @@
 isolated interaction history").
 
 Every decision this UAV took in the current episode becomes one line of its context, e.g.
-``r4 explore_local() -1.23`` (round, action, reward). Two rules keep the prompt cache-friendly:
+``r4 cover_landmark(L1) -1.2`` (round, action, reward). The line is new prompt text every
+round, so it is as terse as the options: a one-parameter invocation names its value only
+(``cover_landmark(target_id=L1)`` reads ``cover_landmark(L1)``, as the option did) and the
+reward carries one decimal. Two rules keep the prompt cache-friendly:
 
 * **Frozen lines.** A line is written the first time it is shown (the round after the
   decision, when lockstep has delivered its reward) and never changes afterwards, so from
@@ -18,9 +21,12 @@ with peers, which is what "isolated" means in the paper.
 
 from __future__ import annotations
 
+import math
+import re
 from dataclasses import dataclass
 
 MAX_INVOCATION = 80  # characters of an invocation shown in a line
+_ONE_PARAM = re.compile(r"([A-Za-z0-9_]+)\([A-Za-z0-9_]+=([A-Za-z0-9_.-]{1,64})\)")
 
 
 @dataclass(frozen=True)
@@ -31,13 +37,24 @@ class _Decision:
 
 
 def _reward_text(reward: float) -> str:
-    value = round(reward, 2)
-    return "0.00" if value == 0 else f"{value:.2f}"  # never "-0.00"
+    value = round(reward, 1)
+    if not math.isfinite(value):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if value == int(value):
+        return str(int(value))  # "-1", "0": never "-0" or a trailing ".0"
+    return f"{value:.1f}"
+
+
+def short_invocation(invocation: str) -> str:
+    """``skill(key=value)`` with one plain value as ``skill(value)`` (``prompt.option_text``'s
+    form); anything else unchanged."""
+    match = _ONE_PARAM.fullmatch(invocation)
+    return f"{match.group(1)}({match.group(2)})" if match else invocation
 
 
 def history_line(round_: int, invocation: str, chosen: bool, reward: float | None) -> str:
     """One frozen history line (compact: digits are one token each for small models)."""
-    text = f"r{round_} {invocation[:MAX_INVOCATION]}"
+    text = f"r{round_} {short_invocation(invocation)[:MAX_INVOCATION]}"
     if not chosen:
         text += " [no choice]"
     if reward is not None:
