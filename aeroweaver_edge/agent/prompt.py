@@ -60,10 +60,10 @@ SYSTEM_PROMPT = (
 )
 
 FORMAT = (
-    'How a round reads: "you N,E vS" is your position (metres north, east) and speed '
-    '(m/s); "landmark: L0 30 NE" lists what you sense by id, distance in metres and '
-    'compass direction from you; a message\'s position reads the same way, and "rK" marks '
-    "a message older than the last round."
+    'How a round reads: "you N,E vS" is the observing UAV\'s position (metres north, east) '
+    'and speed (m/s); "landmark: L0 30 NE" lists what it senses by id, distance in metres '
+    'and compass direction from it; a message\'s position reads the same way, and "rK" '
+    "marks a message older than the last round."
 )
 
 HISTORY_HEADER = "## Your past rounds (action, reward)"
