@@ -252,8 +252,8 @@ def prefix_messages(
     view: MissionView, uav: str, skill_docs: Sequence[str], *, history: bool
 ) -> list[dict[str, str]]:
     """The cacheable part of this UAV's decision prompts alone (system message and the agent
-    part up to its options), to prefill a server cache slot before the first round.
-    ``history`` no longer changes it (the history follows the options); kept for callers."""
+    part up to the options: "You are UAV x."), to prefill a server cache slot before the
+    first round. ``history`` no longer changes it (the history follows the options)."""
     request = DecisionRequest(
         observation=Observation(uav, 0, 0, VehicleState((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))),
         mission_text=view.text,
@@ -267,5 +267,5 @@ def prefix_messages(
     )
     return [
         {"role": "system", "content": static_part(request)},
-        {"role": "user", "content": _identity(request, PromptLimits()) + OPTIONS_HEADER + "\n"},
+        {"role": "user", "content": _identity(request, PromptLimits())},
     ]
