@@ -90,6 +90,11 @@ def _group(e: Entity) -> str:
     return f"{e.kind} ({e.role})" if e.role else e.kind
 
 
+def place(src: Vec3, dst: Vec3) -> str:
+    """``"<d> <bearing>"``: where ``dst`` is seen from ``src`` as the prompt reads it."""
+    return f"{metres5(horizontal_distance(src, dst))} {bearing(src, dst)}"
+
+
 def describe(obs: Observation) -> str:
     """The observation as the LLM reads it (format in the module docstring): entities grouped
     by kind (and role), in the order of ``describe_state``."""
@@ -98,8 +103,7 @@ def describe(obs: Observation) -> str:
     lines = [f"you {metres5(pos[0])},{metres5(pos[1])} v{round(speed)}"]
     groups: dict[str, list[str]] = {}
     for e in sorted(obs.entities, key=lambda e: (e.kind, e.id)):
-        d = horizontal_distance(pos, e.pos)
-        groups.setdefault(_group(e), []).append(f"{e.id} {metres5(d)} {bearing(pos, e.pos)}")
+        groups.setdefault(_group(e), []).append(f"{e.id} {place(pos, e.pos)}")
     lines += [f"{what}: {', '.join(items)}" for what, items in groups.items()]
     if not obs.entities:
         lines.append("nothing in range")

@@ -18,8 +18,9 @@ Everything per round is terse, because it is the uncached part: small models tok
 every digit separately and spend a token on a unit. The system message explains the format
 once (cached): ``you -10,15 v2`` is the own position and speed, ``landmark: L0 30 NE``
 an entity's id, distance in metres and compass point from the reader (``describe``). A
-message's position is such a distance and compass point too, its other fields
-``key=value``; its round is shown only when it is not the previous round's. An option with
+message's position is such a distance and compass point too (left out when it reads the
+same as where its sender or target is seen), its other fields ``key=value``; its round is
+shown only when it is not the previous round's. An option with
 one parameter names its value only (``cover_landmark(L2)``).
 
 Peer messages are *data*. They sit under one ``## Messages`` header, one line per message
@@ -42,10 +43,10 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from aeroweaver_edge.agent.describe import HUGE, pop_place
+from aeroweaver_edge.agent.describe import HUGE, place, pop_place
 from aeroweaver_edge.observation import MissionView, Observation, VehicleState
 from aeroweaver_edge.ports import Candidate, DecisionRequest
 from aeroweaver_edge.wire import InboxMessage
@@ -62,8 +63,9 @@ SYSTEM_PROMPT = (
 FORMAT = (
     'How a round reads: "you N,E vS" is the observing UAV\'s position (metres north, east) '
     'and speed (m/s); "landmark: L0 30 NE" lists what it senses by id, distance in metres '
-    'and compass direction from it; a message\'s position reads the same way, and "rK" '
-    "marks a message older than the last round."
+    "and compass direction from it; a message's position reads the same way (left out "
+    'when it is where its sender or target is seen), and "rK" marks a message older than '
+    "the last round."
 )
 
 HISTORY_HEADER = "## Your past rounds (action, reward)"
@@ -137,6 +139,7 @@ def format_message(
     limits: PromptLimits,
     own: tuple[float, float] | None = None,
     now: int | None = None,
+    places: Mapping[str, str] | None = None,
 ) -> str:
     """One peer message as one line of data: ``<sender> <kind> r<round>: <skill> <target>
     k=v ... <d> <bearing>``.
@@ -147,10 +150,17 @@ def format_message(
     for a model that spends a token per digit, and easier to use than absolute coordinates.
     With ``now`` (the reading round), ``r<round>`` is left out for a message of the round
     before: lockstep delivers those every round, only an older one is worth marking.
+    ``places`` (id -> place, as the observation reads it) leaves out a position that reads
+    the same as where the sender or the message's target is seen: the line names it already.
     """
     body = dict(msg.body)
+    target = body.get("target_id")
     lead = [_value(v) for k in ("skill", "target_id") if (v := body.pop(k, "")) != ""]
     where = (None if own is None else pop_place(body, own, unit="")) or ""
+    if where and places is not None:
+        named = (places.get(msg.h.sender), places.get(target) if isinstance(target, str) else None)
+        if where in named:
+            where = ""
     keyed = [
         f"{_SAFE_KEY.sub('_', str(k))[: limits.max_id_chars] or '_'}={_value(v)}"
         for k, v in sorted(body.items())
@@ -228,7 +238,8 @@ def round_part(request: DecisionRequest, limits: PromptLimits | None = None) -> 
         if dropped:
             parts.append(f"({dropped} older messages omitted)")
         own = (obs.own.pos[0], obs.own.pos[1])
-        parts += [format_message(m, limits, own, obs.round) for m in messages]
+        places = {e.id: place(obs.own.pos, e.pos) for e in obs.entities}
+        parts += [format_message(m, limits, own, obs.round, places) for m in messages]
     cue = answer_cue(request.candidates)
     if cue:
         parts.append(cue)
