@@ -2,11 +2,16 @@
 isolated interaction history").
 
 Every decision this UAV took in the current episode becomes one line of its context, e.g.
-``r4 explore_local() -1.23`` (round, action, reward). Two rules keep the prompt cache-friendly:
+``r4 cover_landmark(L1) -1.2`` (round, action, reward). The line is new prompt text every
+round, so it is as terse as the options: a one-parameter invocation names its value only
+(``cover_landmark(target_id=L1)`` reads ``cover_landmark(L1)``, as the option did) and the
+reward carries one decimal. Two rules keep the prompt cache-friendly:
 
 * **Frozen lines.** A line is written the first time it is shown (the round after the
   decision, when lockstep has delivered its reward) and never changes afterwards, so from
   round to round the history only grows at its end and the server reuses every token before.
+  A line whose action repeats the line before reads ``r5 same -1.1``: it depends only on
+  lines already frozen, and the first line of a window always names its action.
 * **Block window.** Showing the last ``block`` lines would shift the text every round (a
   cache miss every round). Instead the shown lines start at a block boundary: between
   ``block`` and ``2 * block - 1`` of the most recent lines are visible, and the text changes
@@ -18,9 +23,13 @@ with peers, which is what "isolated" means in the paper.
 
 from __future__ import annotations
 
+import math
+import re
 from dataclasses import dataclass
 
 MAX_INVOCATION = 80  # characters of an invocation shown in a line
+SAME = "same"  # the action of the line before, repeated (cover_landmark(L0) round after round)
+_ONE_PARAM = re.compile(r"([A-Za-z0-9_]+)\([A-Za-z0-9_]+=([A-Za-z0-9_.-]{1,64})\)")
 
 
 @dataclass(frozen=True)
@@ -31,13 +40,34 @@ class _Decision:
 
 
 def _reward_text(reward: float) -> str:
-    value = round(reward, 2)
-    return "0.00" if value == 0 else f"{value:.2f}"  # never "-0.00"
+    value = round(reward, 1)
+    if not math.isfinite(value):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if value == int(value):
+        return str(int(value))  # "-1", "0": never "-0" or a trailing ".0"
+    return f"{value:.1f}"
 
 
-def history_line(round_: int, invocation: str, chosen: bool, reward: float | None) -> str:
-    """One frozen history line (compact: digits are one token each for small models)."""
-    text = f"r{round_} {invocation[:MAX_INVOCATION]}"
+def short_invocation(invocation: str) -> str:
+    """``skill(key=value)`` with one plain value as ``skill(value)`` (``prompt.option_text``'s
+    form); anything else unchanged."""
+    match = _ONE_PARAM.fullmatch(invocation)
+    return f"{match.group(1)}({match.group(2)})" if match else invocation
+
+
+def history_line(
+    round_: int,
+    invocation: str,
+    chosen: bool,
+    reward: float | None,
+    previous: str | None = None,
+) -> str:
+    """One frozen history line (compact: digits are one token each for small models);
+    ``same`` when the shown line before it (``previous``, its invocation) did the same."""
+    action = short_invocation(invocation)[:MAX_INVOCATION]
+    if previous is not None and short_invocation(previous)[:MAX_INVOCATION] == action:
+        action = SAME
+    text = f"r{round_} {action}"
     if not chosen:
         text += " [no choice]"
     if reward is not None:
@@ -55,7 +85,7 @@ class InteractionHistory:
         self._episode: int | None = None
         self._pending: list[_Decision] = []
         self._rewards: dict[int, float] = {}
-        self._lines: list[str] = []
+        self._lines: list[tuple[_Decision, float | None]] = []  # frozen: decision, reward
         self._dropped = 0  # lines before _lines[0] that can never be shown again
 
     def _enter(self, episode: int) -> None:
@@ -81,10 +111,7 @@ class InteractionHistory:
         due = sorted((d for d in self._pending if d.round < round_), key=lambda d: d.round)
         if due:
             self._pending = [d for d in self._pending if d.round >= round_]
-            for d in due:
-                self._lines.append(
-                    history_line(d.round, d.invocation, d.chosen, self._rewards.get(d.round))
-                )
+            self._lines += [(d, self._rewards.get(d.round)) for d in due]
         # A reward of an earlier round can no longer change a frozen line: forget it.
         self._rewards = {r: v for r, v in self._rewards.items() if r >= round_}
         total = self._dropped + len(self._lines)
@@ -92,4 +119,8 @@ class InteractionHistory:
         if start > self._dropped:  # the window moved on: forget what it left behind
             del self._lines[: start - self._dropped]
             self._dropped = start
-        return tuple(self._lines)
+        shown = []
+        for i, (d, reward) in enumerate(self._lines):
+            before = self._lines[i - 1][0].invocation if i else None
+            shown.append(history_line(d.round, d.invocation, d.chosen, reward, before))
+        return tuple(shown)

@@ -2,7 +2,7 @@
 "the state summarizes local observations, received peer messages, execution progress, and
 relevant mission context").
 
-Lines, in order: the round (execution progress), the observation (``describe``), then with
+Lines, in order: the round (execution progress), the observation (``describe_state``), then with
 ``context=True`` the mission context (role, local goal, this UAV's private facts) and one
 line per received peer message. Messages are summarised for matching, not quoted: a
 position in a body becomes distance and compass point from this UAV (5 m steps, like
@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import re
 
-from aeroweaver_edge.agent.describe import HUGE, describe, pop_place
+from aeroweaver_edge.agent.describe import HUGE, describe_state, pop_place
 from aeroweaver_edge.observation import MissionView, Observation
 from aeroweaver_edge.wire import InboxMessage
 
@@ -57,7 +57,7 @@ def message_summary(msg: InboxMessage, own: tuple[float, float]) -> str:
 
 def state_text(obs: Observation, view: MissionView | None, *, context: bool) -> str:
     """The retrieval state of this round; ``context=False`` gives pose and entities only."""
-    lines = [f"round {obs.round}", describe(obs)]
+    lines = [f"round {obs.round}", describe_state(obs)]
     if not context:
         return "\n".join(lines)
     if view is not None:

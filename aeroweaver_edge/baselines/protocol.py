@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from aeroweaver_edge.agent.prompt import quote_data
+from aeroweaver_edge.agent.prompt import FORMAT, quote_data
 from aeroweaver_edge.wire import CentralAsk
 
 _LABEL = re.compile(r"^\s*([A-Z])\.\s")
@@ -107,7 +107,7 @@ def _team_lines(asks: Sequence[CentralAsk]) -> list[str]:
 
 
 def central_system(mission: Mission, asks: Sequence[CentralAsk]) -> str:
-    parts = [CENTRAL_SYSTEM, "", "## Mission", quote_data(mission.text)]
+    parts = [CENTRAL_SYSTEM, FORMAT, "", "## Mission", quote_data(mission.text)]
     if mission.constraints:
         lines = (quote_data(c, max_chars=300, multiline=False) for c in mission.constraints)
         parts += ["", "## Constraints", *(f"- {c}" for c in lines)]

@@ -122,7 +122,7 @@ class RemoteSelector:
             role=request.role,
             local_goal=request.local_goal,
             observation=request.observation_text,
-            messages=[format_message(m, limits, own) for m in messages],
+            messages=[format_message(m, limits, own, obs.round) for m in messages],
             options=[f"{c.label}. {option_text(c)}" for c in request.candidates],
         )
 

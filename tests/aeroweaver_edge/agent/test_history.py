@@ -18,19 +18,25 @@ def play(h: InteractionHistory, episode: int, rounds: range) -> list[tuple[str, 
 
 
 def test_a_line_names_round_invocation_and_reward_compactly() -> None:
-    assert history_line(4, "explore_local()", True, -1.234) == "r4 explore_local() -1.23"
+    assert history_line(4, "explore_local()", True, -1.234) == "r4 explore_local() -1.2"
     assert history_line(5, "hold_position()", False, None) == "r5 hold_position() [no choice]"
-    assert history_line(6, "x()", True, -0.001) == "r6 x() 0.00"  # never "-0.00"
-    assert history_line(7, "y" * 200, True, 1.0) == "r7 " + "y" * 80 + " 1.00"
+    assert history_line(6, "x()", True, -0.001) == "r6 x() 0"  # never "-0"
+    assert history_line(7, "y" * 200, True, 1.0) == "r7 " + "y" * 80 + " 1"
+    # one plain parameter: its value only, as the option read; anything else unchanged
+    assert history_line(8, "cover_landmark(target_id=L1)", True, -2.06) == (
+        "r8 cover_landmark(L1) -2.1"
+    )
+    assert history_line(9, "go_to(north=1, east=2)", True, None) == "r9 go_to(north=1, east=2)"
+    assert history_line(9, "say(text=a b)", True, float("nan")) == "r9 say(text=a b) nan"
 
 
 def test_each_round_shows_the_earlier_rounds_with_their_rewards() -> None:
     shown = play(InteractionHistory(block=8), 0, range(4))
     assert shown[0] == ()
     assert shown[3] == (
-        "r0 skill_0() 0.00",
-        "r1 skill_1() -1.00",
-        "r2 skill_2() -2.00",
+        "r0 skill_0() 0",
+        "r1 skill_1() -1",
+        "r2 skill_2() -2",
     )
 
 
@@ -42,7 +48,7 @@ def test_the_window_turns_over_in_blocks_so_text_only_grows_in_between() -> None
         prev, now = shown[t - 1], shown[t]
         if now[: len(prev)] != prev:
             turnovers.append(t)
-            assert now[0] == f"r{t - block} skill_{t - block}() {-(t - block):.2f}"
+            assert now[0] == f"r{t - block} skill_{t - block}() {-(t - block)}"
     assert turnovers == [8, 12, 16]  # 2 * block lines decided, then every block rounds
     assert all(min(t, block) <= len(s) <= 2 * block - 1 for t, s in enumerate(shown))
     assert shown[19][-1].startswith("r18 ")  # the newest line is always there
@@ -65,7 +71,7 @@ def test_a_new_episode_starts_empty_and_old_rewards_are_ignored() -> None:
     h.record_reward(0, 3, 9.0)  # a late reward of the last episode
     h.record_decision(1, 0, "b()", False)
     h.record_reward(1, 0, 2.5)
-    assert h.lines(1, 1) == ("r0 b() [no choice] 2.50",)
+    assert h.lines(1, 1) == ("r0 b() [no choice] 2.5",)
 
 
 def test_block_must_be_positive() -> None:

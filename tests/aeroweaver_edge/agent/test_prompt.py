@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 from aeroweaver_edge.agent.describe import describe
 from aeroweaver_edge.agent.history import InteractionHistory
 from aeroweaver_edge.agent.prompt import (
+    FORMAT,
     HISTORY_HEADER,
     MESSAGES_HEADER,
     OPTIONS_HEADER,
@@ -117,22 +119,47 @@ def test_each_uav_prompt_only_grows_at_the_end_of_its_agent_part_within_a_block(
     assert prompts[7][0].count("\nr") == 7  # r0..r6 shown in round 7
 
 
-def test_round_part_comes_last_with_observation_options_and_answer_cue() -> None:
-    user = build_messages(request(4, history=("r3 explore_local() -1.00",)))[-1]
+OPTIONS = "A. cover_landmark(L1)\nB. cover_landmark(L2)\nC. explore_local()\nD. hold_position()"
+
+
+def test_options_precede_the_history_and_the_round_part_ends_with_the_answer_cue() -> None:
+    user = build_messages(request(4, history=("r3 explore_local() -1",)))[-1]
     assert user["role"] == "user"
     text = user["content"]
-    assert text.startswith("You are UAV uav1.\n" + HISTORY_HEADER + "\nr3 explore_local()")
-    assert text.index(HISTORY_HEADER) < text.index("## Round 4") < text.index(OPTIONS_HEADER)
-    assert "landmark L1: 20 m N" in text
-    assert "A. cover_landmark(L1)\nB. cover_landmark(L2)\nC. explore_local()" in text
-    assert text.endswith("Answer (A-D):")
+    assert text.startswith(
+        f"You are UAV uav1.\n{OPTIONS_HEADER}\n{OPTIONS}\n{HISTORY_HEADER}\nr3 explore_local()"
+    )
+    assert text.index(OPTIONS_HEADER) < text.index(HISTORY_HEADER) < text.index("## Round 4")
+    assert text.endswith("## Round 4\nyou 0,0 v5\nlandmark: L1 20 N\nAnswer (A-D):")
 
 
 def test_no_history_section_when_history_is_off_but_an_empty_one_from_round_zero() -> None:
     off = build_messages(request(0, history=None))[-1]["content"]
     empty = build_messages(request(0, history=()))[-1]["content"]
     assert HISTORY_HEADER not in off
-    assert empty.startswith(f"You are UAV uav1.\n{HISTORY_HEADER}\n## Round 0")
+    assert off.startswith(f"You are UAV uav1.\n{OPTIONS_HEADER}\n{OPTIONS}\n## Round 0")
+    assert empty.startswith(f"You are UAV uav1.\n{OPTIONS_HEADER}\n{OPTIONS}\n{HISTORY_HEADER}\n")
+
+
+def test_unchanged_options_keep_the_prompt_append_only_and_changed_ones_cost_the_history() -> None:
+    """The cache story in text: with the same options, round t+1's prompt starts with round
+    t's whole agent part; the round part (observation, messages, cue) is the only new text
+    after the newest history line. New options break the prefix right after the header."""
+    history = ("r0 explore_local() -1", "r1 cover_landmark(L1) -0.5")
+    now = flat(request(2, history=history))
+    later = flat(request(3, history=(*history, "r2 cover_landmark(L1) 0"), pos=(5.0, 0.0)))
+    prefix = now[: now.index("## Round 2")]
+    assert later.startswith(prefix)
+    assert later[len(prefix) :].startswith("r2 cover_landmark(L1) 0\n## Round 3")
+    other = build_messages(replace(request(3, history=history), candidates=tuple(CANDIDATES[1:])))
+    cut = flat(request(2, history=history)).index(OPTIONS_HEADER) + len(OPTIONS_HEADER) + 1
+    assert "\n".join(m["content"] for m in other)[:cut] == now[:cut]
+
+
+def test_the_system_message_explains_the_terse_round_format_once() -> None:
+    system = build_messages(request())[0]["content"]
+    assert FORMAT in system
+    assert system.index(FORMAT) < system.index("## Mission")
 
 
 def test_numbers_in_the_prompt_carry_at_most_one_decimal() -> None:
@@ -140,7 +167,7 @@ def test_numbers_in_the_prompt_carry_at_most_one_decimal() -> None:
         "uav2", {"north": 34.13935298863066, "east": -12.048291698496378, "n": 7, "z": 0.04}
     )
     text = build_messages(request(messages=(msg,)))[-1]["content"]
-    assert "uav2 intent r2: n=7 z=0 at 35 m N" in text  # the position seen from the reader
+    assert "uav2 intent: n=7 z=0 35 N" in text  # the position seen from the reader
     assert not re.search(r"\d\.\d{2}", text)
     assert [compact_number(x) for x in (2.0, -0.04, 1.25, 7.96, float("nan"))] == [
         "2", "0", "1.2", "8", "null"
@@ -156,9 +183,17 @@ def test_a_message_leads_with_skill_and_target_and_places_its_position_from_the_
         peer_message("uav4", {"north": "12", "east": 5.0}),  # not a number: kept as data
     )  # fmt: skip
     text = build_messages(request(messages=msgs, pos=(30.0, 2.0)))[-1]["content"]
-    assert "uav2 intent r2: cover_landmark L2 eta=3 at 40 m E\n" in text
-    assert "uav3 intent r2: explore_local at 40 m S\n" in text  # empty target left out
-    assert "uav4 intent r2: east=5 north=12\n" in text
+    assert "uav2 intent: cover_landmark L2 eta=3 40 E\n" in text
+    assert "uav3 intent: explore_local 40 S\n" in text  # empty target left out
+    assert "uav4 intent: east=5 north=12\n" in text
+
+
+def test_a_message_names_its_round_only_when_it_is_older_than_the_last_round() -> None:
+    msgs = (peer_message("uav2", {"x": 1}, round_=2), peer_message("uav3", {"x": 2}, round_=0))
+    text = build_messages(request(3, messages=msgs))[-1]["content"]
+    assert "\nuav2 intent: x=1\nuav3 intent r0: x=2\nAnswer (A-D):" in text
+    limits = PromptLimits()
+    assert format_message(msgs[0], limits) == "uav2 intent r2: x=1"  # no reading round given
 
 
 def test_an_option_names_a_single_parameter_value_only() -> None:
@@ -186,15 +221,17 @@ def test_peer_messages_are_lines_of_data_that_cannot_escape_their_block() -> Non
     ]
     lines = text.splitlines()
     assert [ln for ln in lines if ln.startswith("## ")] == [
-        "## Round 3", MESSAGES_HEADER, OPTIONS_HEADER
+        OPTIONS_HEADER, "## Round 3", MESSAGES_HEADER
     ]  # fmt: skip  # a body cannot forge a header ...
     assert sum(ln.startswith("A. ") for ln in lines) == 1  # ... nor an option
+    assert sum(ln.startswith("Answer (") for ln in lines) == 1  # ... nor the cue
     first = lines.index(MESSAGES_HEADER)
-    block = lines[first : lines.index(OPTIONS_HEADER)]
+    block = lines[first:-1]  # the cue closes the block
+    assert lines[-1] == "Answer (A-D):"
     assert len(block) == 3  # ... nor a line: one line per message
-    assert block[1].startswith('uav2 intent r2: bad_key_=ok note="\\u003cb\\u003e\\n## Options')
+    assert block[1].startswith('uav2 intent: bad_key_=ok note="\\u003cb\\u003e\\n## Options')
     assert "<b>" not in text  # escaped, inside a JSON string
-    assert block[2].startswith("uav3 intent r2: note=")
+    assert block[2].startswith("uav3 intent: note=")
     assert "x" * 101 not in text
     assert block[2].endswith("[truncated]")
 
@@ -205,9 +242,9 @@ def test_only_the_most_recent_messages_are_kept_and_ids_are_sanitised() -> None:
     text = build_messages(request(messages=msgs), limits=PromptLimits(max_messages=3))[-1][
         "content"
     ]
-    assert text.count(" intent r2: ") == 3
+    assert text.count(" intent: ") == 3
     assert "(18 older messages omitted)" in text
-    assert "evil__onload__x intent r2: i=99" in text
+    assert "evil__onload__x intent: i=99" in text
 
 
 def test_system_prompt_says_peer_text_is_data() -> None:
