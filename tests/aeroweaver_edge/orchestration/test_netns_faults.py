@@ -101,6 +101,15 @@ async def test_a_partition_of_two_uavs_heals_and_they_rejoin(lab: NetLab, tmp_pa
     assert stalled == [], [(log.round, log.missed, log.wait_s, log.refused) for log in stalled]
     for log in during:
         assert cut_off <= set(log.absent)
+    # every round of the run, before, during and after the cut: each UAV the world counted
+    # present answered it (none missed, none refused as wrong_round) and was scored
+    for log in run.rounds:
+        present = set(placement) - set(log.absent)
+        where = (log.episode, log.round)
+        assert set(log.commands) == present, (where, log.missed, log.refused)
+        assert log.missed == (), (where, log.missed)
+        assert log.refused == {}, (where, log.refused)
+        assert present <= set(log.result.rewards), (where, sorted(log.result.rewards))
     # after the heal both decide again, each at most once a round (the world keeps one)
     healed_at = run.rounds.index(during[-1]) + 1
     after = run.rounds[healed_at:]
