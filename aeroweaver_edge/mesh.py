@@ -56,6 +56,7 @@ from .intake import (
     VerifyBudget,
     low_pass_filter,
 )
+from .link_timeout import LinkTimeouts
 from .security.pki import PkiError
 from .security.signing import ATTACHMENT_BYTES
 from .security.signing import VERSION as SIGNING_VERSION
@@ -190,7 +191,10 @@ default two workers, two peers going silent together block both, and the session
 router: every client's traffic) hears nothing for 10 s. Measured in
 ``tests/aeroweaver_edge/orchestration/test_netns_faults.py`` (docs/reliability.md). With
 ``RX_WORKERS`` workers, up to ``RX_WORKERS - 1`` links dying silently within 10 s leave a
-worker for the live ones. An operator's own ``ZENOH_RUNTIME`` is left as it is."""
+worker for the live ones. An operator's own ``ZENOH_RUNTIME`` is left as it is. The cure is
+``link_timeout``: every TCP/TLS link gets ``TCP_USER_TIMEOUT`` = the lease, so such a close
+no longer waits out the linger; the extra workers stay as the second line (a link whose
+socket was not found, a platform without the option)."""
 
 _log_initialised = False
 
@@ -428,7 +432,8 @@ class Mesh:
         self._session = session
         self._loop = loop
         self._declared: list[Declared] = []
-        self._closing: asyncio.Task[None] | None = None
+        self._link_timeouts: LinkTimeouts | None = None
+        self._closing: asyncio.Future[None] | None = None
         self.budget = VerifyBudget(budget)
         self._intakes: dict[Lane, list[Declared]] = {"control": [], "bulk": []}
         # One FIFO per writer for every control subscription together, so one writer's
@@ -460,7 +465,10 @@ class Mesh:
             ) from None
         log.debug("%s: zenoh session %s open", node_id, session.zid())
         loop = asyncio.get_running_loop()
-        return cls(session, node_id=node_id, codec=codec or Codec(), loop=loop, security=security)
+        mesh = cls(session, node_id=node_id, codec=codec or Codec(), loop=loop, security=security)
+        # A link that dies silently must not block a zenoh RX thread for SO_LINGER's 10 s.
+        mesh._link_timeouts = LinkTimeouts(session, cfg.lease_ms, node_id)
+        return mesh
 
     @property
     def session(self) -> zenoh.Session:
@@ -820,10 +828,15 @@ class Mesh:
                 if handle._entity is not None:
                     entities.append(handle._entity)
                     handle._entity = None
-            work = asyncio.to_thread(_undeclare_all, entities, self._session)
-            self._closing = asyncio.ensure_future(work)
+            guard, self._link_timeouts = self._link_timeouts, None
+            self._closing = asyncio.ensure_future(self._close(guard, entities))
             self._closing.add_done_callback(lambda _: log.debug("%s: closed", self.node_id))
         await asyncio.shield(self._closing)
+
+    async def _close(self, guard: LinkTimeouts | None, entities: list[_Undeclarable]) -> None:
+        if guard is not None:
+            await guard.aclose()
+        await asyncio.to_thread(_undeclare_all, entities, self._session)
 
     async def __aenter__(self) -> Self:
         return self

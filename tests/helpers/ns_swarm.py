@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import subprocess
 import sys
 import time
@@ -24,6 +25,7 @@ from aeroweaver_edge.config import (
 )
 from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.swarm import world_task
+from aeroweaver_edge.run_dir import ENV_PARENT
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.wire import ProgressReport
@@ -133,11 +135,15 @@ async def run_ns_swarm(
             path = workdir / f"{uav}.json"
             path.write_text(ucfg.model_dump_json(), encoding="utf-8")
             run.logs[uav] = workdir / f"{uav}.log"
+            # Started by this run (as ``sim --processes`` starts them): each daemon ends with
+            # the run's world and dies with this process. Without it a daemon is a service
+            # that lands and waits for the next mission, and the run never ends.
+            env = {**os.environ, ENV_PARENT: str(os.getpid())}
             with run.logs[uav].open("wb") as log:
                 run.procs[uav] = subprocess.Popen(  # noqa: ASYNC220 - spawn only, no wait
                     [*seg.prefix(), sys.executable, "-m", "aeroweaver_edge.cli", "daemon",
                      "--config", str(path)],
-                    stdin=subprocess.DEVNULL, stdout=log, stderr=log,
+                    stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env,
                 )  # fmt: skip
         try:
             missing = await runner.wait_alive(uavs, 120.0)

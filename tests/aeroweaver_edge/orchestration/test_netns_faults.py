@@ -7,8 +7,13 @@ figures (``pytest -s``)."""
 
 from __future__ import annotations
 
+import asyncio
+import itertools
 import json
+import os
 import sqlite3
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -16,10 +21,13 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.agent.memory_tools import check
+from aeroweaver_edge.config import MeshConfig
+from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.orchestration.swarm import percentiles
 from aeroweaver_edge.sim.runner import RoundLog
 from tests.helpers.netlab import NetLab, Segment
 from tests.helpers.ns_swarm import NsRun, run_ns_swarm, wait_until
+from tests.helpers.zenoh_net import free_port
 
 pytestmark = pytest.mark.slow
 WHY_NOT = NetLab.unavailable()
@@ -101,6 +109,15 @@ async def test_a_partition_of_two_uavs_heals_and_they_rejoin(lab: NetLab, tmp_pa
     assert stalled == [], [(log.round, log.missed, log.wait_s, log.refused) for log in stalled]
     for log in during:
         assert cut_off <= set(log.absent)
+    # every round of the run, before, during and after the cut: each UAV the world counted
+    # present answered it (none missed, none refused as wrong_round) and was scored
+    for log in run.rounds:
+        present = set(placement) - set(log.absent)
+        where = (log.episode, log.round)
+        assert set(log.commands) == present, (where, log.missed, log.refused)
+        assert log.missed == (), (where, log.missed)
+        assert log.refused == {}, (where, log.refused)
+        assert present <= set(log.result.rewards), (where, sorted(log.result.rewards))
     # after the heal both decide again, each at most once a round (the world keeps one)
     healed_at = run.rounds.index(during[-1]) + 1
     after = run.rounds[healed_at:]
@@ -172,3 +189,111 @@ async def test_a_lossy_slow_link_delays_rounds_but_loses_nothing(
         "round_wall_s": percentiles(log.wall_s for log in run.rounds),
         "records_lost": len(lost),
     }))  # fmt: skip
+
+
+ROUTER = """
+import asyncio, sys, time
+import zenoh
+import aeroweaver_edge.mesh as mesh_mod
+from aeroweaver_edge.config import MeshConfig
+
+async def main() -> None:
+    port, host, seconds, cure = int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), sys.argv[4]
+    if cure == "off":  # the control: zenoh as it is, to show what the test measures
+        mesh_mod.LinkTimeouts = lambda *args, **kwargs: None
+    mesh = await mesh_mod.Mesh.open(
+        MeshConfig(mode="router", listen=[f"tcp/127.0.0.1:{port}", f"tcp/{host}:{port}"],
+                   namespace="lt", lease_ms=2000, insecure=True),
+        node_id="router",
+    )
+    arrivals = []
+    sub = mesh.session.declare_subscriber(
+        "ping", zenoh.handlers.Callback(lambda s: arrivals.append(time.monotonic()), indirect=False)
+    )
+    print("ready", flush=True)
+    await asyncio.sleep(seconds)
+    sub.undeclare()
+    await mesh.aclose()
+    print(" ".join(f"{t:.3f}" for t in arrivals), flush=True)
+
+asyncio.run(main())
+"""
+
+CLIENT = """
+import asyncio, sys
+from aeroweaver_edge.config import MeshConfig
+from aeroweaver_edge.mesh import Mesh
+
+async def main() -> None:
+    mesh = await Mesh.open(
+        MeshConfig(mode="client", listen=[], connect=[f"tcp/{sys.argv[1]}:{sys.argv[2]}"],
+                   namespace="lt", lease_ms=2000, insecure=True),
+        node_id="cut",
+    )
+    print("up", flush=True)
+    try:
+        await asyncio.sleep(60)
+    finally:
+        await mesh.aclose()
+
+asyncio.run(main())
+"""
+
+
+def longest_gap(start: float, end: float, arrivals: list[float]) -> float:
+    """The longest time in [start, end] with nothing arriving."""
+    marks = [start, *(t for t in arrivals if start <= t <= end), end]
+    return max(b - a for a, b in itertools.pairwise(marks))
+
+
+async def test_a_silently_dead_link_does_not_deafen_a_router_with_one_rx_thread(
+    lab: NetLab,
+) -> None:
+    """The partition stall's cause, alone: a router with ONE zenoh RX thread, a live client
+    on loopback putting every 0.1 s, and a client across a veth link that is cut (no FIN, no
+    RST). At lease expiry zenoh closes the dead link on its RX thread; without
+    ``link_timeout`` that close waits out SO_LINGER (10 s) and the live client is not heard
+    for 10 s. With it, the live client's puts keep arriving."""
+    seg = lab.veth()
+    port = free_port()
+    env = {**os.environ, "ZENOH_RUNTIME": "(rx: (worker_threads: 1))"}
+    router = subprocess.Popen(  # noqa: ASYNC220 - spawn only, no wait
+        [sys.executable, "-c", ROUTER, str(port), seg.host_ip, "14", "on"],
+        stdout=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    procs = [router]
+    try:
+        assert router.stdout is not None
+        assert (await asyncio.to_thread(router.stdout.readline)).strip() == "ready"
+        cut_client = subprocess.Popen(  # noqa: ASYNC220 - spawn only, no wait
+            [*seg.prefix(), sys.executable, "-c", CLIENT, seg.host_ip, str(port)],
+            stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        procs.append(cut_client)
+        assert cut_client.stdout is not None
+        assert (await asyncio.to_thread(cut_client.stdout.readline)).strip() == "up"
+        live = await Mesh.open(
+            MeshConfig(mode="client", listen=[], connect=[f"tcp/127.0.0.1:{port}"],
+                       namespace="lt", lease_ms=2000, insecure=True),
+            node_id="live",
+        )  # fmt: skip
+        try:
+            await asyncio.sleep(1.0)  # both links up
+            lab.down(seg)
+            cut = time.monotonic()
+            while time.monotonic() - cut < 8.0:  # the lease (2 s) expires at ~2 s
+                live.session.put("ping", b"x")
+                await asyncio.sleep(0.1)
+            end = time.monotonic()
+        finally:
+            await live.aclose()
+        out, _ = await asyncio.to_thread(router.communicate, timeout=60)
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    arrivals = [float(t) for t in out.split()]
+    gap = longest_gap(cut, end, arrivals)
+    print(json.dumps({"test": "dead link, one RX thread", "longest_gap_s": round(gap, 2)}))
+    assert gap < 3.0, f"the router heard nothing for {gap:.2f} s after the cut"
