@@ -389,8 +389,6 @@ async def run_swarm(
             plan = with_full_catalogue(plan)
         if opts.option_order == "seeded":
             plan = with_seeded_order(plan, opts.seed)
-        if on_plan is not None:  # the terminal shows who flies what before it flies
-            on_plan(plan)
         task = world_task(plan, opts.max_rounds)
         uavs = task.uav_ids
         summary = RunSummary(
@@ -418,6 +416,8 @@ async def run_swarm(
                 summary.selector = f"central:{opts.baseline}:{llm.model}"
         else:
             summary.selector = "scripted:reference"
+        if on_plan is not None:  # who flies what, before it flies (and after every refusal)
+            on_plan(plan)
         sim_cfg = SimConfig(
             task=plan.task,
             uavs=len(uavs),
