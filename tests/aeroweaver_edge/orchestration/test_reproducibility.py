@@ -95,7 +95,11 @@ def round_trace(path: Path) -> list[dict[str, Any]]:
     return out
 
 
-async def test_the_same_seed_twice_gives_the_same_rounds_across_episodes(tmp_path: Path) -> None:
+# docs/reliability.md runs this command twice and compares the traces (--trace, --json).
+SAME_SEED = "sim pursuit_evasion --selector scripted --seed 3 --uavs 3 --episodes 3 --rounds 20"
+
+
+def test_the_same_seed_twice_gives_the_same_rounds_across_episodes(tmp_path: Path) -> None:
     """pursuit_evasion seed 3, three episodes, in-process, twice: every round the same.
     Each episode starts its rounds at 0 again; a peer's round-0 target report that arrived
     before a UAV's own round-0 beacon was refused as older than every own position kept
@@ -103,18 +107,18 @@ async def test_the_same_seed_twice_gives_the_same_rounds_across_episodes(tmp_pat
     so whether ``follow_peer(evader0)`` was offered depended on thread timing (before the
     fix, 11 CLI runs of 4 episodes gave 8 different traces). No refusal, no missing
     message either."""
+    from aeroweaver_edge.cli import main
+
+    assert int(SAME_SEED.split("--rounds ")[1]) > POSITION_MEMORY
     runs = []
     for i in range(2):
-        opts = SwarmOptions(
-            task="pursuit_evasion", seed=3, uavs=3, episodes=3,
-            max_rounds=POSITION_MEMORY + 4, beta=0.8, selector="scripted",
-            memory_dir=tmp_path / f"memory{i}",
-            trace_path=tmp_path / f"trace{i}.jsonl", deadline_s=10.0,
-        )  # fmt: skip
-        data = (await run_swarm(opts)).as_dict()
+        out, trace = tmp_path / f"run{i}.json", tmp_path / f"trace{i}.jsonl"
+        argv = [*SAME_SEED.split(), "--json", str(out), "--trace", str(trace), "--quiet"]
+        assert main(argv) == 0
+        data = json.loads(out.read_text())
         assert data["security"]["rejected"] == {}, data["security"]
         assert data["security"]["missing_messages"] == 0
-        runs.append((data, round_trace(tmp_path / f"trace{i}.jsonl")))
+        runs.append((data, round_trace(trace)))
     (a, trace_a), (b, trace_b) = runs
     assert [r["at"] for r in trace_a].count((1, 0)) == 1  # a second episode ran
     assert any("follow_peer" in d["invocation"] for r in trace_a for d in r["decisions"].values())
