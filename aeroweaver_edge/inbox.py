@@ -132,8 +132,18 @@ class Inbox:
         return ahead is not None and own is not None and round_ > own + ahead
 
     def too_old(self, round_: int) -> bool:
-        """A round older than every own position kept: its reach can never be judged."""
-        return bool(self._positions) and round_ < min(self._positions)
+        """A round older than every own position kept: its reach can never be judged.
+
+        Rounds restart at 0 with each episode, and a peer may start the next episode (and
+        send in its first rounds) before this UAV has published its own first beacon of it.
+        Such a message is not old but early: its reach is judged at ``collect``, once our
+        position in its round is known. So the first rounds a peer may be ahead by
+        (``future_rounds``, the window ``too_far_ahead`` allows) are never too old here;
+        refusing them on arrival made acceptance depend on which of two daemons ran first,
+        and repeated lockstep runs of one seed diverged at episode starts."""
+        if not self._positions or round_ >= min(self._positions):
+            return False
+        return round_ > (self.limits.future_rounds or 0)
 
     def _ahead_reason(self, round_: int) -> str:
         """Why a message too far ahead is dropped: sent in the last two rounds of the episode

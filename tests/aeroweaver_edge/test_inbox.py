@@ -85,3 +85,28 @@ def test_a_round_older_than_every_kept_position_is_too_old() -> None:
     assert inbox.too_old(oldest - 1)
     assert not inbox.too_old(oldest)
     assert not inbox.too_old(POSITION_MEMORY + 10)
+
+
+def test_the_next_episodes_first_rounds_are_not_too_old_before_our_own_beacon() -> None:
+    """A peer may start the next episode (rounds restart at 0) and send in it before this
+    UAV publishes its own first beacon of it. Refused as too old on arrival, whether the
+    message counted depended on which daemon ran first: repeated lockstep runs of one seed
+    diverged at episode starts (pursuit_evasion seed 3: a ``follow_peer`` option offered or
+    not). Such a message is early, not old: it waits for collect, which judges its reach on
+    our position in its round. A round that cannot be an episode start stays too old."""
+    inbox = Inbox("uav0")
+    for rnd in range(24):  # the episode that just ended
+        inbox.note_position(rnd, HERE)
+    ahead = inbox.limits.future_rounds
+    assert ahead is not None
+    for rnd in range(ahead + 1):
+        assert not inbox.too_old(rnd), rnd
+    assert inbox.too_old(ahead + 1)
+    assert inbox.too_old(24 - POSITION_MEMORY - 1)
+    assert inbox.admit(msg(1, 0)) is None
+    inbox.offer(msg(1, 0))  # the peer's round 0 of the next episode
+    inbox.note_position(0, HERE)  # our own first beacon of it, after the message
+    assert collect(inbox, -1) == []
+    inbox.note_position(1, HERE)
+    assert [m.h.seq for m in collect(inbox, 0)] == [1]
+    assert inbox.stats.rejected == {}

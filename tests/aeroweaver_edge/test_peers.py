@@ -251,3 +251,28 @@ async def test_beacons_are_not_followed_unless_asked(zenoh_net: ZenohNet) -> Non
     assert dict(quiet.neighbours) == {}
     assert await quiet.refresh_neighbours(timeout_s=2.0) == 1
     assert quiet.neighbours["loud"].pos == (1.0, 1.0, -5.0)
+
+
+async def test_a_peers_next_episode_message_sent_before_our_own_beacon_counts(
+    zenoh_net: ZenohNet,
+) -> None:
+    """Rounds restart at 0 each episode. A peer that starts the next episode first and
+    broadcasts in its round 0 before the receiver's own round-0 beacon used to be refused
+    on arrival (no_own_position), so whether it counted depended on which daemon ran first
+    and repeated lockstep runs of one seed diverged. Its reach is judged at collect."""
+    links = await swarm(zenoh_net, "a", "b")
+    a, b = links["a"], links["b"]
+    for r in range(24):  # the episode that ended
+        a.publish_beacon(r, (0.0, 0.0, -5.0), STILL)
+        b.publish_beacon(r, (10.0, 0.0, -5.0), STILL)
+    a.publish_beacon(0, (0.0, 0.0, -5.0), STILL)  # a starts the next episode first
+    ref = await a.send("*", "target", {"target_id": "evader0"}, round=0)
+    assert ref is not None
+    assert await eventually(lambda: b.stats.received == 1 or bool(b.stats.rejected))
+    assert b.stats.rejected == {}
+    b.publish_beacon(0, (10.0, 0.0, -5.0), STILL)  # then b
+    assert await b.collect_inbox(timeout_s=0.0, max_round=-1) == []
+    b.publish_beacon(1, (10.0, 0.0, -5.0), STILL)
+    [got] = await b.collect_inbox([ref], timeout_s=2.0, max_round=0)
+    assert (got.h.sender, got.round, got.body) == ("a", 0, {"target_id": "evader0"})
+    assert (b.stats.rejected, b.stats.missing) == ({}, 0)

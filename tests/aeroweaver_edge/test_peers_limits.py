@@ -231,7 +231,9 @@ async def test_cheap_refusals_come_before_the_queue(zenoh_net: ZenohNet) -> None
     a, b, mallory = await pair(zenoh_net)
     for r in range(2, 40):
         b.publish_beacon(r, HERE, STILL)
-    old = msg("a", 1, 1, round_=1)  # round 1: older than every position b keeps
+    # round 10: older than every position b keeps (24..39), and not one of the first rounds
+    # a next episode may send in before b's own first beacon of it (those wait for collect)
+    old = msg("a", 1, 1, round_=10)
     mallory.put(KEYS.inbox("b", "a"), old, block=True)
     wrong = InboxMessage(h=Header(sender="a", epoch=1, seq=2, stamp=0.0), to="c", round=39,
                          kind="status", sender_pos=HERE)  # fmt: skip

@@ -8,12 +8,14 @@ here says anything about an LLM's quality."""
 
 from __future__ import annotations
 
+import json
 import sqlite3
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from aeroweaver_edge.inbox import POSITION_MEMORY
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 
 EPISODES = 3
@@ -72,3 +74,56 @@ async def test_beta_runs_give_the_same_returns_in_process_and_in_processes(
             positions = [i for i, r in enumerate(rows) if r[0] != "" and r[2] == k]
             assert batch == sorted(batch)
             assert max(positions) < first_own_next, (uav, k)
+
+
+def round_trace(path: Path) -> list[dict[str, Any]]:
+    """Per round: where every body was, what each UAV was offered and chose (and the
+    scores), the rewards; without wall-clock latencies and sequence numbers."""
+    keep = ("invocation", "options", "base", "advantage", "chosen", "held", "hold_cause")
+    out = []
+    for line in path.read_text().splitlines():
+        row = json.loads(line)
+        if row.get("type") != "round":
+            continue
+        out.append({
+            "at": (row["episode"], row["round"]),
+            "bodies": row["bodies"],
+            "rewards": row["rewards"],
+            "senders": [m["from"] for m in row["messages"]],
+            "decisions": {u: {k: d.get(k) for k in keep} for u, d in row["decisions"].items()},
+        })  # fmt: skip
+    return out
+
+
+# docs/reliability.md runs this command twice and compares the traces (--trace, --json).
+SAME_SEED = "sim pursuit_evasion --selector scripted --seed 3 --uavs 3 --episodes 3 --rounds 20"
+
+
+def test_the_same_seed_twice_gives_the_same_rounds_across_episodes(tmp_path: Path) -> None:
+    """pursuit_evasion seed 3, three episodes, in-process, twice: every round the same.
+    Each episode starts its rounds at 0 again; a peer's round-0 target report that arrived
+    before a UAV's own round-0 beacon was refused as older than every own position kept
+    (no_own_position; only after an episode longer than POSITION_MEMORY rounds, hence 20),
+    so whether ``follow_peer(evader0)`` was offered depended on thread timing (before the
+    fix, 11 CLI runs of 4 episodes gave 8 different traces). No refusal, no missing
+    message either."""
+    from aeroweaver_edge.cli import main
+
+    assert int(SAME_SEED.split("--rounds ")[1]) > POSITION_MEMORY
+    runs = []
+    for i in range(2):
+        out, trace = tmp_path / f"run{i}.json", tmp_path / f"trace{i}.jsonl"
+        argv = [*SAME_SEED.split(), "--json", str(out), "--trace", str(trace), "--quiet"]
+        assert main(argv) == 0
+        data = json.loads(out.read_text())
+        assert data["security"]["rejected"] == {}, data["security"]
+        assert data["security"]["missing_messages"] == 0
+        runs.append((data, round_trace(trace)))
+    (a, trace_a), (b, trace_b) = runs
+    assert [r["at"] for r in trace_a].count((1, 0)) == 1  # a second episode ran
+    assert any("follow_peer" in d["invocation"] for r in trace_a for d in r["decisions"].values())
+    for ra, rb in zip(trace_a, trace_b, strict=True):
+        assert ra == rb, ra["at"]
+    assert [e["agent_returns"] for e in a["episodes"]] == [
+        e["agent_returns"] for e in b["episodes"]
+    ]
