@@ -26,6 +26,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
@@ -179,37 +180,63 @@ def _top(scores: dict[str, float]) -> tuple[str | None, float]:
 
 
 def agreement(
-    prompts: Sequence[dict[str, Any]], formats: Sequence[str], threads: int, *, cache: bool
+    prompts: Sequence[dict[str, Any]],
+    formats: Sequence[str],
+    threads: int,
+    *,
+    cache: bool,
+    scores_out: Path | None = None,
+    first: int = 0,
 ) -> list[dict[str, Any]]:
     """Per format (Q4_1 first, the reference): first-token label log-probs on every recorded
-    prompt, compared with Q4_1's. ``cache``: replay the prompts in their recorded order with
-    their recorded cache slot (``id_slot``), as the run sent them, so each UAV's prefix is
-    reused (cheap; llama.cpp's cache reuse shifts log-probs by ~0.03 nats, notes/llm.md);
-    else every prompt is processed whole."""
-    ref_fmt = weights.SHIPPED
-    formats = [ref_fmt, *[f for f in formats if f != ref_fmt]]
-    scores: dict[str, list[dict[str, float]]] = {f: [] for f in formats}
-    labels = [option_labels(p) for p in prompts]
+    prompt, compared with Q4_1's (``summarize``). ``cache``: replay the prompts in their
+    recorded order with their recorded cache slot (``id_slot``), as the run sent them, so
+    each UAV's prefix is reused (cheap; llama.cpp's cache reuse shifts log-probs by ~0.03
+    nats, notes/llm.md); else every prompt is processed whole. ``scores_out``: one JSON line
+    per prompt as it is done, numbered from ``first`` (``--from-scores`` summarises such
+    files, also partial ones)."""
+    formats = [weights.SHIPPED, *[f for f in formats if f != weights.SHIPPED]]
+    per_prompt: list[dict[str, dict[str, float]]] = []
     slots = SLOTS if cache else 1
-    with httpx.Client() as client, _servers(formats, threads, n_parallel=slots) as servers:
-        for body, labs in zip(prompts, labels, strict=True):
+    with ExitStack() as stack:
+        client = stack.enter_context(httpx.Client())
+        pool = stack.enter_context(ThreadPoolExecutor(len(formats)))
+        servers = stack.enter_context(_servers(formats, threads, n_parallel=slots))
+        out = stack.enter_context(scores_out.open("w", encoding="utf-8")) if scores_out else None
+        for i, body in enumerate(prompts):
+            labs = option_labels(body)
             req = {k: v for k, v in body.items() if k != "stream"}
             if cache and isinstance(req.get("id_slot"), int):
                 req["id_slot"] = req["id_slot"] % slots
             else:
                 req.pop("id_slot", None)
             req.update(cache_prompt=cache, top_logprobs=max(20, int(req.get("top_logprobs", 20))))
-            for fmt in formats:
-                data = _post(client, f"{servers[fmt].base_url}/chat/completions", req)
-                scores[fmt].append(label_logprobs(data, labs))
-            done = len(scores[ref_fmt])
-            if done % 50 == 0:
-                print(f"agreement: {done}/{len(prompts)} prompts", file=sys.stderr, flush=True)
+            # The formats' servers work on the same prompt at once (one thread each).
+            futures = {
+                fmt: pool.submit(_post, client, f"{servers[fmt].base_url}/chat/completions", req)
+                for fmt in formats
+            }
+            row = {fmt: label_logprobs(f.result(), labs) for fmt, f in futures.items()}
+            per_prompt.append(row)
+            if out is not None:
+                line = {"prompt": first + i, "labels": labs, "scores": row}
+                out.write(json.dumps(line) + "\n")
+                out.flush()
+            if (i + 1) % 50 == 0:
+                print(f"agreement: {i + 1}/{len(prompts)} prompts", file=sys.stderr, flush=True)
+    return summarize(per_prompt, formats)
+
+
+def summarize(
+    per_prompt: Sequence[dict[str, dict[str, float]]], formats: Sequence[str]
+) -> list[dict[str, Any]]:
+    """Top-1 agreement with Q4_1 over each prompt's option labels, |delta log-prob| over the
+    labels both returned, and Q4_1's top-two margin where the picks differ."""
     rows = []
-    ref = scores[ref_fmt]
     for fmt in formats:
         same, deltas, margins, n = 0, [], [], 0
-        for a, b in zip(ref, scores[fmt], strict=True):
+        for row in per_prompt:
+            a, b = row.get(weights.SHIPPED, {}), row.get(fmt, {})
             top_a, margin = _top(a)
             top_b, _ = _top(b)
             if top_a is None or top_b is None:
@@ -234,10 +261,16 @@ def agreement(
     return rows
 
 
+def _round_prompt(body: dict[str, Any]) -> bool:
+    """A daemon's round decision: pinned to its cache slot (``--llm-slots``) and lettered
+    options. The endpoint probe and the Commander's calls carry no slot."""
+    return isinstance(body.get("id_slot"), int) and len(option_labels(body)) >= 2
+
+
 def record(out: Path, tasks: Sequence[str], seeds: Sequence[int], rounds: int) -> int:
     """Run ``aeroweaver sim`` episodes against the fake provider (``llm.fake_provider``: a
     real loopback OpenAI-compatible server with seeded label preferences) and write every
-    option-bearing chat request body it received as JSON Lines.
+    round-decision request body it received as JSON Lines.
 
     The fake answers in milliseconds, so hundreds of round prompts of all nine tasks take
     minutes on a loaded machine, where the embedded model needs hours; the prompts are the
@@ -253,7 +286,7 @@ def record(out: Path, tasks: Sequence[str], seeds: Sequence[int], rounds: int) -
                 cmd += ["--seed", str(seed), "--rounds", str(rounds)]  # the task's own team
                 cmd += ["--llm", fp.base_url, "--model", fp.model, "--llm-slots"]
                 done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-                bodies = [b for b in fp.chat_bodies() if len(option_labels(b)) >= 2]
+                bodies = [b for b in fp.chat_bodies() if _round_prompt(b)]
             print(f"recorded {task} seed {seed}: exit {done.returncode}, {len(bodies)} prompts",
                   file=sys.stderr)  # fmt: skip
             if done.returncode != 0:
@@ -265,7 +298,7 @@ def record(out: Path, tasks: Sequence[str], seeds: Sequence[int], rounds: int) -
     return len(kept)
 
 
-def _read_prompts(path: Path, limit: int | None) -> list[dict[str, Any]]:
+def _read_prompts(path: Path, start: int, limit: int | None) -> list[dict[str, Any]]:
     """The recorded chat bodies in ``path`` (JSON Lines)."""
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
@@ -280,7 +313,7 @@ def _read_prompts(path: Path, limit: int | None) -> list[dict[str, Any]]:
             f"--prompts {path}: a line is not a recorded chat request",
             "give a file written by 'aeroweaver bench weights --record FILE'",
         )
-    return rows[:limit]
+    return rows[start : None if limit is None else start + limit]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -292,13 +325,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--n-batch", type=int_in(1), default=None, help="llama.cpp n_batch")
     p.add_argument("--n-ubatch", type=int_in(1), default=None, help="llama.cpp n_ubatch")
     p.add_argument("--prompts", type=Path, help="agreement on these recorded prompts (JSONL)")
-    p.add_argument("--limit", type=int_in(1), default=None, help="the first N recorded prompts")
+    p.add_argument("--start", type=int_in(0), default=0, help="skip the first N recorded prompts")
+    p.add_argument("--limit", type=int_in(1), default=None, help="use N recorded prompts")
     p.add_argument("--record", type=Path, help="record round prompts to this JSONL and stop")
     p.add_argument("--tasks", nargs="+", choices=TASK_NAMES, default=list(TASK_NAMES))
     p.add_argument("--seeds", type=int, nargs="+", default=[1])
     p.add_argument("--rounds", type=int_in(1), default=24)
     p.add_argument("--skip-speed", action="store_true", help="only the agreement")
     p.add_argument("--no-cache", action="store_true", help="agreement: every prompt whole")
+    p.add_argument("--scores", type=Path, help="agreement: per-prompt label log-probs (JSONL)")
+    p.add_argument("--from-scores", type=Path, nargs="+", help="summarise --scores files, stop")
     args = p.parse_args(argv)
     try:
         return _run(args)
@@ -307,12 +343,26 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(args: Any) -> int:
+    if args.from_scores:
+        per_prompt = []
+        for path in args.from_scores:
+            try:
+                lines = path.read_text(encoding="utf-8").splitlines()
+                per_prompt += [json.loads(line)["scores"] for line in lines if line.strip()]
+            except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+                raise UserError(f"--from-scores {path}: {one_line(str(exc))}") from None
+        formats = list(dict.fromkeys(f for row in per_prompt for f in row))
+        for row in summarize(per_prompt, formats):
+            print(json.dumps(row))
+        return 0
+    if args.scores:
+        check_output_file(args.scores, "--scores")
     if args.record:
         check_output_file(args.record, "--record")
         n = record(args.record, args.tasks, args.seeds, args.rounds)
         print(json.dumps({"recorded": n, "file": str(args.record)}))
         return 0
-    prompts = _read_prompts(args.prompts, args.limit) if args.prompts else []
+    prompts = _read_prompts(args.prompts, args.start, args.limit) if args.prompts else []
     if args.prompts and not prompts:
         raise UserError(f"--prompts {args.prompts} holds no prompt")
     source = find_model()
@@ -340,7 +390,14 @@ def _run(args: Any) -> int:
             print(json.dumps(r))
     if prompts:
         load0 = load_average()
-        rows = agreement(prompts, args.formats, min(args.threads), cache=not args.no_cache)
+        rows = agreement(
+            prompts,
+            args.formats,
+            min(args.threads),
+            cache=not args.no_cache,
+            scores_out=args.scores,
+            first=args.start,
+        )
         for row in rows:
             row["load"] = [round(load0, 2), round(load_average(), 2)]
             print(json.dumps(row))

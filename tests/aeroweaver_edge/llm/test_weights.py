@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import shutil
 import threading
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import gguf
+import httpx
 import numpy as np
 import pytest
 
@@ -32,7 +34,7 @@ def _shipped() -> Path:
 def converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
     """(shipped, cache dir, the Q8_0 file) converted once for this module."""
     source = _shipped()
-    cache = tmp_path_factory.mktemp("cache")
+    cache = tmp_path_factory.mktemp("xdg") / "aeroweaver"  # $XDG_CACHE_HOME/aeroweaver
     return source, cache, weights.prepare(source, "q8_0", cache)
 
 
@@ -84,6 +86,29 @@ def test_conversion_round_trips_the_weights(converted: tuple[Path, Path, Path]) 
         # half a step, plus the f16 rounding of the block scale
         assert np.all(np.abs(x - y) <= step * 0.5 + np.abs(x) * 2e-3 + 1e-7), name
     assert converted_count == 210  # 30 blocks x 7 matrices
+
+
+@pytest.mark.embedded
+def test_the_server_loads_the_converted_file(
+    converted: tuple[Path, Path, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """llama.cpp accepts the written file and answers with label log-probs from it."""
+    _, cache, output = converted
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache.parent))
+    monkeypatch.delenv(weights.WEIGHTS_ENV, raising=False)
+    with EmbeddedServer(threads=1) as server:  # the default format: Q8_0
+        assert server.served_path == output
+        body = {
+            "model": server.model,
+            "messages": [{"role": "user", "content": "Options:\nA. land\nB. hold\nAnswer:"}],
+            "max_tokens": 1,
+            "logprobs": True,
+            "top_logprobs": 20,
+        }
+        answer = httpx.post(f"{server.base_url}/chat/completions", json=body, timeout=300).json()
+    top = answer["choices"][0]["logprobs"]["content"][0]["top_logprobs"]
+    assert len(top) == 20
+    assert all(math.isfinite(t["logprob"]) and t["logprob"] <= 0 for t in top)
 
 
 @pytest.mark.embedded
