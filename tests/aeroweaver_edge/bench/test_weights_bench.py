@@ -81,6 +81,7 @@ def test_unreadable_prompts_are_one_line(
 
 
 @pytest.mark.embedded
+@pytest.mark.timeout(900)  # a conversion, four servers and a simulated episode under load
 def test_record_then_time_and_compare(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
