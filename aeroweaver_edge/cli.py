@@ -504,6 +504,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from aeroweaver_edge.bench import llm_latency
 
         return llm_latency.main(["--uavs", str(args.uavs), "--rounds", str(args.rounds)])
+    if args.what == "weights":  # the embedded model's weight formats: prompt tokens/s
+        from aeroweaver_edge.bench import weights
+
+        return weights.main([])
     raise AssertionError(f"unknown benchmark {args.what!r}")  # argparse choices
 
 
@@ -847,6 +851,7 @@ BENCH_WHATS = [
     "reference",
     "mavlink",
     "llm_latency",
+    "weights",
     "security",
     "flood",
     "fuzz",

