@@ -213,10 +213,14 @@ class SimLink:
         self, key: tuple[int, int], bound_s: float | None = None, *, until_newer: bool = False
     ) -> None:
         """Lockstep: a round's reward reaches the agent before its next round starts.
-        ``until_newer``: stop early once a perception of a later round has arrived."""
+        ``until_newer``: stop early once a perception of a later round has arrived. An ended
+        world (``end_world``, its shutdown) ends the wait at once: a daemon whose world died
+        mid-round lands then, not after the round's deadline."""
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(self._reward_wait_s if bound_s is None else bound_s):
                 while key not in self._reward_seen and not (until_newer and self._taken > key):
+                    if self._over:  # the world ended or went for good: no reward will come
+                        return
                     self._reward_arrived.clear()
                     await self._reward_arrived.wait()
 

@@ -206,9 +206,13 @@ def test_daemons_whose_world_is_killed_hold_then_land_and_wait_for_the_next_miss
         assert not [ln for ln in err.splitlines() if ln.startswith("aeroweaver:")], err
         if "-> mission (offboard control)" not in err:
             continue  # not in the plan (the task needs two of the three): never flew
-        held = err.index("the simulated world went away mid-flight; holding")
-        over = err.index("the simulated world is gone; its mission is over")
-        landing = err.index("flight phase mission -> landing (the simulated world ended)")
+        lines = (
+            "the simulated world went away mid-flight; holding",
+            "the simulated world is gone; its mission is over",
+            "flight phase mission -> landing (the simulated world ended)",
+        )
+        assert all(line in err for line in lines), err
+        held, over, landing = (err.index(line) for line in lines)
         assert held < over < landing, err
         assert "idle, waiting for the next mission" in err
         # it held first, and let the world go only once the grace was over
