@@ -1,6 +1,8 @@
 """Paired statistics over seed sequences: bootstrap interval and Wilcoxon signed-rank test.
 
-Written out (a few lines each) so the adaptation bench needs no scipy. The signed-rank test
+Written out so the adaptation bench needs no scipy; the exact test and the mid-ranks are
+``bench.stats``' (the benchmark's), this module adds the normal approximation above
+``EXACT_MAX`` and the adaptation bench's record. The signed-rank test
 is two-sided, drops zero differences (Wilcoxon's method) and gives tied magnitudes their
 average rank; up to ``EXACT_MAX`` non-zero differences the p-value is exact (the
 permutation distribution of the positive-rank sum, ties included, by dynamic programming
@@ -15,6 +17,8 @@ import random
 import statistics
 from collections.abc import Sequence
 from typing import Final
+
+from aeroweaver_edge.bench.stats import midranks, wilcoxon
 
 EXACT_MAX: Final = 50
 EQUAL_TOL: Final = 1e-9  # differences within this are "equal" (float noise, not an effect)
@@ -34,21 +38,6 @@ def bootstrap_ci(
     return (lo, hi)
 
 
-def _ranks(values: Sequence[float]) -> list[float]:
-    """Ranks 1..n, ties sharing their average rank."""
-    order = sorted(range(len(values)), key=lambda i: values[i])
-    ranks = [0.0] * len(values)
-    i = 0
-    while i < len(order):
-        j = i
-        while j + 1 < len(order) and values[order[j + 1]] == values[order[i]]:
-            j += 1
-        for k in range(i, j + 1):
-            ranks[order[k]] = (i + j) / 2 + 1
-        i = j + 1
-    return ranks
-
-
 def wilcoxon_p(diffs: Sequence[float]) -> float:
     """Two-sided p-value of the signed-rank test that the differences centre on 0;
     1.0 when every difference is zero."""
@@ -56,21 +45,12 @@ def wilcoxon_p(diffs: Sequence[float]) -> float:
     n = len(d)
     if n == 0:
         return 1.0
-    ranks = _ranks([abs(x) for x in d])
+    if n <= EXACT_MAX:  # the benchmark's exact test (bench.stats), on the same differences
+        exact = wilcoxon(d)
+        assert exact is not None  # d has no zero
+        return exact.p
+    ranks = midranks([abs(x) for x in d])
     w_plus = math.fsum(r for r, x in zip(ranks, d, strict=True) if x > 0)
-    if n <= EXACT_MAX:
-        doubled = [round(2 * r) for r in ranks]  # average ranks are halves: integers
-        total = sum(doubled)
-        counts = [0] * (total + 1)  # ways each doubled positive-rank sum arises
-        counts[0] = 1
-        for r in doubled:
-            for s in range(total, r - 1, -1):
-                counts[s] += counts[s - r]
-        w2 = round(2 * w_plus)
-        all_: int = 2**n
-        lower = sum(counts[: w2 + 1]) / all_
-        upper = sum(counts[w2:]) / all_
-        return float(min(1.0, 2 * min(lower, upper)))
     mean = n * (n + 1) / 4
     ties: dict[float, int] = {}
     for rank in ranks:

@@ -42,7 +42,8 @@ class Wilcoxon:
     p: float  # two-sided, exact under the null given these ranks (ties included)
 
 
-def _midranks(values: Sequence[float]) -> list[float]:
+def midranks(values: Sequence[float]) -> list[float]:
+    """Ranks 1..n, ties sharing their average rank."""
     order = sorted(range(len(values)), key=lambda i: values[i])
     ranks = [0.0] * len(values)
     i = 0
@@ -63,7 +64,7 @@ def wilcoxon(diffs: Sequence[float]) -> Wilcoxon | None:
     d = [x for x in diffs if x != 0]
     if not d:
         return None
-    ranks2 = [round(2 * r) for r in _midranks([abs(x) for x in d])]
+    ranks2 = [round(2 * r) for r in midranks([abs(x) for x in d])]
     w2 = sum(r for r, x in zip(ranks2, d, strict=True) if x > 0)
     counts = [0] * (sum(ranks2) + 1)  # counts[s]: sign patterns with doubled W+ = s
     counts[0] = 1
@@ -88,4 +89,4 @@ def holm(pvalues: Sequence[float | None]) -> list[float | None]:
     return out
 
 
-__all__ = ["Wilcoxon", "bootstrap_ci", "holm", "wilcoxon"]
+__all__ = ["Wilcoxon", "bootstrap_ci", "holm", "midranks", "wilcoxon"]

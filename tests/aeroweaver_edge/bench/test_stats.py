@@ -55,9 +55,9 @@ def test_wilcoxon_matches_scipy_exact_with_and_without_ties() -> None:
     ours = wilcoxon(d)
     assert ours is not None
     signs = list(itertools.product([-1, 1], repeat=len(d)))
-    from aeroweaver_edge.bench.stats import _midranks
+    from aeroweaver_edge.bench.stats import midranks
 
-    ranks = _midranks([abs(x) for x in d])
+    ranks = midranks([abs(x) for x in d])
     null = [sum(r for r, s in zip(ranks, sg, strict=True) if s > 0) for sg in signs]
     low = sum(w <= ours.w_plus for w in null) / len(null)
     high = sum(w >= ours.w_plus for w in null) / len(null)
