@@ -21,9 +21,8 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.security.keys_dir import SwarmDir
-from aeroweaver_edge.wire import Keys
+from tests.helpers.swarm_procs import uavs_seen
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "field.md"
@@ -92,20 +91,7 @@ async def uavs_up(keys_dir: Path, uavs: set[str], timeout_s: float) -> bool:
         {**base.model_dump(), "mode": "client", "listen": [],
          "zenoh_overrides": {"connect/timeout_ms": "30000"}}
     )  # fmt: skip
-    mesh = await Mesh.open(cfg, node_id="observer")
-    seen: set[str] = set()
-    try:
-        watch = mesh.watch_liveliness(Keys(keys.swarm).alive_uav("*"))
-        async with asyncio.timeout(timeout_s):
-            async for key, alive in watch:
-                (seen.add if alive else seen.discard)(key.rsplit("/", 1)[-1])
-                if uavs <= seen:
-                    return True
-    except TimeoutError:
-        return False
-    finally:
-        await mesh.aclose()
-    return False
+    return await uavs_seen(cfg, keys.swarm, uavs, timeout_s)
 
 
 def test_the_rehearsal_in_docs_field_md_flies(tmp_path: Path) -> None:

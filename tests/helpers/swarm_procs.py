@@ -94,9 +94,8 @@ def daemon_config(root: Path, uav: str, swarm: str, router: str | None, extra: s
     return path
 
 
-async def _wait_for_uavs(router: str, swarm: str, uavs: set[str], timeout_s: float) -> bool:
-    cfg = MeshConfig(mode="client", listen=[], connect=[router],
-                     zenoh_overrides={"connect/timeout_ms": "30000"})  # fmt: skip
+async def uavs_seen(cfg: MeshConfig, swarm: str, uavs: set[str], timeout_s: float) -> bool:
+    """An observer on ``cfg`` sees every UAV's liveliness token within ``timeout_s``."""
     mesh = await Mesh.open(cfg, node_id="observer")
     seen: set[str] = set()
     try:
@@ -115,7 +114,9 @@ async def _wait_for_uavs(router: str, swarm: str, uavs: set[str], timeout_s: flo
 
 def wait_for_uavs(router: str, swarm: str, uavs: set[str], timeout_s: float = 60.0) -> bool:
     """An observer sees every UAV's token through the router (the router may be starting)."""
-    return asyncio.run(_wait_for_uavs(router, swarm, uavs, timeout_s))
+    cfg = MeshConfig(mode="client", listen=[], connect=[router],
+                     zenoh_overrides={"connect/timeout_ms": "30000"})  # fmt: skip
+    return asyncio.run(uavs_seen(cfg, swarm, uavs, timeout_s))
 
 
 def wait_until(cond: Callable[[], bool], timeout_s: float, step_s: float = 0.1) -> bool:
