@@ -1,11 +1,15 @@
 """HMAS-2 baseline (Chen et al. 2024, adapted as the paper says): a central plan, one local
-review per UAV from its own observation, one central revision, then execution.
+review per UAV from its own observation, at most one central revision, then execution.
 
 Central side (``Hmas2Policy``): the plan is the centralized call; each UAV gets its
 proposed letter (``CentralAnswer`` phase ``proposal``); the node waits (bounded) for the
-UAVs' ``CentralReview``s; the revision call continues the plan conversation (same cached
-prefix) with the reviews and asks for the final plan once. If the revision call fails, the
-plan stands; a letter that is invalid in the final answer makes that UAV hold.
+UAVs' ``CentralReview``s. As in the authors' protocol, the plan is executed as it stands
+when no review disagrees (every local agent agreed, or sent no usable review: silence is not
+feedback), and only a disagreement buys the revision call, which continues the plan
+conversation (same cached prefix) with the reviews and asks for the final plan once (the
+AeroWeaver paper's "revises the plan once": the authors iterate until consensus, we cap it
+at one round so a round's deadline stays bounded). If the revision call fails, the plan
+stands; a letter that is invalid in the final answer makes that UAV hold.
 
 UAV side (``local_review``): one local LLM call in the daemon from the UAV's own prompt
 (mission, role, its skill documents, observation, messages, options) plus the proposal,
@@ -59,6 +63,12 @@ class Hmas2Policy:
         record.reviews = {
             u: {"agree": r.agree, "suggest": r.suggest, "error": r.error} for u, r in got.items()
         }
+        if not any(r.agree is False for r in reviews.values()):
+            why = plan_rec.invalid
+            return {
+                u: Verdict(proposal[u], None, "plan agreed" if proposal[u] else why.get(u, ""))
+                for u in rnd.uavs
+            }
         msgs = revision_messages(plan_msgs, plan_rec.answer, rnd.asks, proposal, reviews)
         final, rev_rec, _ = await plan_call(
             self.client, self.mode, rnd, mission, "revise", self.slot, messages=msgs

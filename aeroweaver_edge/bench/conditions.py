@@ -4,7 +4,7 @@
 |---|---|---|---|---|---|
 | aeroweaver | each UAV's own LLM (first-token logprobs) | top-K for its role | yes | 0.8 | shared |
 | centralized | central node, one call per round | full catalogue | yes | 0 | none used |
-| hmas2 | central plan, local reviews, one revision | full catalogue | yes | 0 | none used |
+| hmas2 | central plan, local reviews, revision on dissent | full catalogue | yes | 0 | none used |
 | no_activation | as aeroweaver | full catalogue (no role filter, no top-K) | yes | 0.8 | shared |
 | no_coordination | as aeroweaver | top-K | task messages only | 0.8 | shared |
 | beta0 | as aeroweaver | top-K | yes | 0 | (not used) |

@@ -46,9 +46,11 @@ def _new(episode: int) -> dict[str, Any]:
         "latency_s": [],
         "central_rounds": 0,
         "central_invalid": 0,
-        # HMAS-2: the UAVs' local reviews of the central plan, and rounds where the central
-        # revision changed the plan for at least one UAV (0 of N: it chose as Centralized)
+        # HMAS-2: the UAVs' local reviews of the central plan, rounds that made the revision
+        # call (only a disagreeing review buys one) and rounds where the revision changed the
+        # plan for at least one UAV (0 of N: it chose as Centralized)
         "central_reviews": {"asked": 0, "agreed": 0},
+        "central_revision_calls": 0,
         "central_revised_rounds": 0,
         "messages": {"sent": 0},
         # position bias: decisions where a label was picked among >= 2 options, and how
@@ -101,6 +103,10 @@ def episode_metrics(lines: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
                         bool(r.get("agree")) for r in reviews.values() if isinstance(r, dict)
                     )
                     e["central_revised_rounds"] += central.get("proposal") != central.get("final")
+                e["central_revision_calls"] += any(
+                    isinstance(c, dict) and c.get("stage") == "revise"
+                    for c in central.get("calls") or []
+                )
         elif kind == "episode_end":
             e = eps.setdefault(int(row["episode"]), _new(int(row["episode"])))
             e["team_return"] = row.get("team_return")

@@ -68,6 +68,7 @@ class CellStats:
     reviews_asked: int = 0
     reviews_agreed: int = 0
     revised_rounds: int = 0
+    revision_calls: int | None = 0  # None: some cell predates the count (result version 2)
     paired: dict[tuple[int, int], float] = field(default_factory=dict)  # (seed, ep) -> return
     per_round: list[float] = field(default_factory=list)  # tokens / rounds, per episode
     setup: list[int] = field(default_factory=list)  # setup tokens spent in each episode
@@ -134,6 +135,7 @@ class CellStats:
         self.reviews_asked += other.reviews_asked
         self.reviews_agreed += other.reviews_agreed
         self.revised_rounds += other.revised_rounds
+        self.revision_calls = _add_known(self.revision_calls, other.revision_calls)
         self.per_round += other.per_round
         self.setup += other.setup
         self.setup_missing += other.setup_missing
@@ -177,6 +179,7 @@ class CellStats:
             "reviews_agreed": self.reviews_agreed,
             "reviews_asked": self.reviews_asked,
             "revised_rounds": self.revised_rounds,
+            "revision_calls": self.revision_calls,
         }
 
 
@@ -240,7 +243,14 @@ def aggregate(cells: Iterable[dict[str, Any]]) -> dict[tuple[str, str], CellStat
             s.reviews_asked += int(reviews.get("asked", 0))
             s.reviews_agreed += int(reviews.get("agreed", 0))
             s.revised_rounds += int(e.get("central_revised_rounds", 0))
+            calls = e.get("central_revision_calls")
+            s.revision_calls = _add_known(s.revision_calls, None if calls is None else int(calls))
     return stats
+
+
+def _add_known(a: int | None, b: int | None) -> int | None:
+    """A sum that stays unknown once one part is (cells recorded before a count existed)."""
+    return None if a is None or b is None else a + b
 
 
 RATIO_BASELINES = ("hmas2", "centralized")
@@ -503,12 +513,17 @@ def markdown(
             "",
             "### HMAS-2: local reviews and central revisions",
             "",
-            "| task | episodes | reviews agreeing with the plan | rounds the revision changed |",
-            "|---|---|---|---|",
+            "| task | episodes | reviews agreeing with the plan | rounds with a revision call "
+            "| rounds the revision changed |",
+            "|---|---|---|---|---|",
         ]
         for t, s in hmas2:
             agree = f"{s.reviews_agreed} of {s.reviews_asked}" if s.reviews_asked else "–"
-            out.append(f"| {t} | {s.n} | {agree} | {s.revised_rounds} of {s.central_rounds} |")
+            calls = s.revision_calls
+            called = "–" if calls is None else f"{calls} of {s.central_rounds}"
+            out.append(
+                f"| {t} | {s.n} | {agree} | {called} | {s.revised_rounds} of {s.central_rounds} |"
+            )
     bad = [(k, s.mismatches) for k, s in stats.items() if s.mismatches]
     if bad:
         out += ["", "Trace vs summary mismatches:"]

@@ -56,7 +56,8 @@ from aeroweaver_edge.llm.embedded import THREADS_ENV
 from aeroweaver_edge.llm.embedded import default_threads as embedded_threads
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
-RESULT_VERSION = 2  # 2: seeded option order, compressed traces
+# 2: seeded option order, compressed traces; 3: HMAS-2 revises only on disagreement
+RESULT_VERSION = 3
 OPTION_ORDER: Final = "seeded"
 DEFAULT_LLM_DEADLINE_S = 60.0
 

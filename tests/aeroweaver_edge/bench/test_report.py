@@ -61,13 +61,14 @@ def test_summary_per_task_pooled_per_condition_and_ratios() -> None:
 def central_round(
     rnd: int, proposal: dict[str, str], final: dict[str, str], agree: list[bool]
 ) -> dict[str, Any]:
+    stages = ["plan", "revise"] if False in agree else ["plan"]  # the revision on disagreement
     return {
         "type": "round",
         "episode": 0,
         "round": rnd,
         "decisions": {},
         "central": {
-            "calls": [],
+            "calls": [{"stage": s} for s in stages],
             "proposal": proposal,
             "final": final,
             "reviews": {f"uav{i}": {"agree": a, "suggest": "A"} for i, a in enumerate(agree)},
@@ -91,15 +92,20 @@ def test_hmas2_reviews_and_revisions_are_counted_and_tabled() -> None:
     (ep,) = episode_metrics(lines)
     assert ep["central_reviews"] == {"asked": 6, "agreed": 3}
     assert ep["central_revised_rounds"] == 1  # round 1 only; round 3 had no reviews
+    assert ep["central_revision_calls"] == 2  # rounds 1 and 2 had a disagreeing review
     assert ep["central_rounds"] == 4
     data = cell("coverage", "hmas2", 1, [-1.0], 10)
     data["episodes"][0].update(
         central_reviews=ep["central_reviews"],
         central_revised_rounds=ep["central_revised_rounds"],
+        central_revision_calls=ep["central_revision_calls"],
         central_rounds=ep["central_rounds"],
     )
     table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
-    assert "| coverage | 1 | 3 of 6 | 1 of 4 |" in table
+    assert "| coverage | 1 | 3 of 6 | 2 of 4 | 1 of 4 |" in table
+    del data["episodes"][0]["central_revision_calls"]  # a cell recorded before the count
+    table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
+    assert "| coverage | 1 | 3 of 6 | – | 1 of 4 |" in table
 
 
 def test_paired_tests_position_bias_and_setup_tokens_in_the_table() -> None:
