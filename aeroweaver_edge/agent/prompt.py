@@ -61,8 +61,8 @@ SYSTEM_PROMPT = (
 )
 
 FORMAT = (
-    'How a round reads: after the past rounds, "you N,E" is the observing UAV\'s position '
-    '(metres north, east) now; "landmark: L0 30 NE" lists what it senses by id, distance '
+    'How a round reads: "you N,E" is the observing UAV\'s position now (metres north, '
+    'east), after its past rounds; "landmark: L0 30 NE" lists what it senses by id, distance '
     "in metres and compass direction from it; a message's position reads the same way (left out "
     'when it is where its sender or target is seen), and "rK" marks a message older than '
     "the last round."
