@@ -9,14 +9,17 @@ the text goes from the most to the least stable:
    then the agent's own interaction history (``agent.history``). The options come before
    the history because they rarely change from round to round (the same landmarks, the
    same skills) while the history grows at its end every round: with the options after it
-   they were new text every round, here they are new only in a round where they change;
-3. **round part** -- this round's observation and peer messages, then the one-line answer
-   cue with the label span, last, where the first-token logprobs are read. Only this part
-   (and the newest history line) is new in a round whose options did not change.
+   they were new text every round, here they are new only in a round where they change.
+   Where they keep changing (a pursuer's targets come and go) a change would re-process the
+   whole shown history, so ``OptionPlacement`` moves them after it for a while;
+3. **round part** -- this round's observation (no round header: the newest history line
+   says which round came before) and peer messages, then the one-line answer cue with the
+   label span, last, where the first-token logprobs are read. Only this part (and the
+   newest history line) is new in a round whose options did not change.
 
 Everything per round is terse, because it is the uncached part: small models tokenise
 every digit separately and spend a token on a unit. The system message explains the format
-once (cached): ``you -10,15 v2`` is the own position and speed, ``landmark: L0 30 NE``
+once (cached): ``you -10,15`` is the own position, ``landmark: L0 30 NE``
 an entity's id, distance in metres and compass point from the reader (``describe``). A
 message's position is such a distance and compass point too (left out when it reads the
 same as where its sender or target is seen), its other fields ``key=value``; its round is
