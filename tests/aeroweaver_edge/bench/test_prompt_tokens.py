@@ -7,6 +7,7 @@ embedded model's template and tokenizer: structure and the counting rule, not fi
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import pytest
 
@@ -36,7 +37,7 @@ def test_a_short_coverage_flight_is_counted_as_the_slot_cache_does(
     system = {"role": "system", "content": "You decide. " * 20}
     first = {"role": "user", "content": "You are UAV uav0.\n## Options\nA. a()\nB. b()\nyou 0,0"}
     grown = {**first, "content": first["content"] + "\nlandmark: L0 5 N"}
-    bodies = [
+    bodies: list[dict[str, Any]] = [
         {"id_slot": 0, "messages": [system, first]},
         {"id_slot": 1, "messages": [system, first]},
         {"id_slot": 0, "messages": [system, grown]},
