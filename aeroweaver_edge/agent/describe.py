@@ -1,11 +1,12 @@
 """The textual observation, in two renderings of the same rounded numbers (metres to 5 m):
 
 * ``describe`` -- what the LLM reads each round (the round part of the prompt, the
-  baselines' prompts too). It is not cached, so it is terse: ``you -10,15 v2`` (north, east,
-  speed), then one line per kind of entity, ``landmark: L0 30 NE, L1 25 S`` (id, metres,
-  compass point). The cached system message explains the format once (``prompt.FORMAT``):
-  SmolLM2 spends a token per digit and per unit, and "landmark L0: 30 m NE" cost 10 tokens
-  per entity where ``L0 30 NE`` costs 6.
+  baselines' prompts too). It is not cached, so it is terse: ``you -10,15`` (north, east;
+  no speed: no option depends on it and it cost 2-3 tokens a round), then one line per
+  kind of entity, ``landmark: L0 30 NE, L1 25 S`` (id, metres, compass point). The cached
+  system message explains the format once (``prompt.FORMAT``): SmolLM2 spends a token per
+  digit and per unit, and "landmark L0: 30 m NE" cost 10 tokens per entity where
+  ``L0 30 NE`` costs 6.
 * ``describe_state`` -- the base of the state text that experience retrieval matches on
   (``agent.state_text``), unchanged so stored experience keeps matching: one entity per
   line with the id right before the distance, so the retrieval tokeniser pairs them
@@ -99,8 +100,7 @@ def describe(obs: Observation) -> str:
     """The observation as the LLM reads it (format in the module docstring): entities grouped
     by kind (and role), in the order of ``describe_state``."""
     pos = obs.own.pos
-    speed = math.hypot(obs.own.vel[0], obs.own.vel[1])
-    lines = [f"you {metres5(pos[0])},{metres5(pos[1])} v{round(speed)}"]
+    lines = [f"you {metres5(pos[0])},{metres5(pos[1])}"]  # no speed: no option depends on it
     groups: dict[str, list[str]] = {}
     for e in sorted(obs.entities, key=lambda e: (e.kind, e.id)):
         groups.setdefault(_group(e), []).append(f"{e.id} {place(pos, e.pos)}")

@@ -13,9 +13,12 @@ reward carries one decimal. Two rules keep the prompt cache-friendly:
   A line whose action repeats the line before reads ``r5 same -1.1``: it depends only on
   lines already frozen, and the first line of a window always names its action.
 * **Block window.** Showing the last ``block`` lines would shift the text every round (a
-  cache miss every round). Instead the shown lines start at a block boundary: between
-  ``block`` and ``2 * block - 1`` of the most recent lines are visible, and the text changes
-  other than by appending once every ``block`` rounds (one miss then).
+  cache miss every round). Instead the shown lines start at a multiple of ``2 * block``:
+  between ``block`` and ``3 * block - 1`` of the most recent lines are visible, and the text
+  changes other than by appending once every ``2 * block`` rounds (one miss then, which
+  re-processes the ``block`` lines kept). With the default block of 8 that is round 24: a
+  24-round episode's history is an append-only tail (with turnover every ``block`` rounds,
+  as before 2026-12-03, round 16 cost each UAV ~60 tokens, ~2.5 per decision).
 
 The history is per UAV and per episode (a new episode starts empty): nothing here is shared
 with peers, which is what "isolated" means in the paper.
@@ -115,7 +118,8 @@ class InteractionHistory:
         # A reward of an earlier round can no longer change a frozen line: forget it.
         self._rewards = {r: v for r, v in self._rewards.items() if r >= round_}
         total = self._dropped + len(self._lines)
-        start = (total // self.block - 1) * self.block if total >= self.block else 0
+        step = 2 * self.block  # the window starts at a multiple of step, >= block lines back
+        start = (total - self.block) // step * step if total >= self.block else 0
         if start > self._dropped:  # the window moved on: forget what it left behind
             del self._lines[: start - self._dropped]
             self._dropped = start

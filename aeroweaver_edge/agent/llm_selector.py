@@ -25,7 +25,7 @@ import string
 from dataclasses import replace
 from typing import Any
 
-from aeroweaver_edge.agent.prompt import PromptLimits, build_messages
+from aeroweaver_edge.agent.prompt import OptionPlacement, PromptLimits, build_messages
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError
 from aeroweaver_edge.llm.logprobs import parse_label_scores
@@ -67,6 +67,7 @@ class LLMSelector:
         self._limits = limits
         self.agent = agent  # ledger name; default: the observing UAV's id
         self._refusals = 0  # unexplained logprob refusals so far (see refusal_verdict)
+        self._placement = OptionPlacement()  # options before or after the history, per UAV
         if probe_result is not None and not probe_result.ok:
             log.warning("%s", probe_result.line())  # says: correction off, text label
 
@@ -129,7 +130,8 @@ class LLMSelector:
         obs = request.observation
         tag = CallTag(self.agent or obs.uav, request.role, obs.episode, obs.round, "decide")
         params = self._params()
-        messages = build_messages(request, limits=self._limits)
+        options_last = self._placement.options_last(request)
+        messages = build_messages(request, limits=self._limits, options_last=options_last)
         try:
             try:
                 result = await self.client.chat(messages, tag=tag, **params)

@@ -9,14 +9,17 @@ the text goes from the most to the least stable:
    then the agent's own interaction history (``agent.history``). The options come before
    the history because they rarely change from round to round (the same landmarks, the
    same skills) while the history grows at its end every round: with the options after it
-   they were new text every round, here they are new only in a round where they change;
-3. **round part** -- this round's observation and peer messages, then the one-line answer
-   cue with the label span, last, where the first-token logprobs are read. Only this part
-   (and the newest history line) is new in a round whose options did not change.
+   they were new text every round, here they are new only in a round where they change.
+   Where they keep changing (a pursuer's targets come and go) a change would re-process the
+   whole shown history, so ``OptionPlacement`` moves them after it for a while;
+3. **round part** -- this round's observation (no round header: the newest history line
+   says which round came before) and peer messages, then the one-line answer cue with the
+   label span, last, where the first-token logprobs are read. Only this part (and the
+   newest history line) is new in a round whose options did not change.
 
 Everything per round is terse, because it is the uncached part: small models tokenise
 every digit separately and spend a token on a unit. The system message explains the format
-once (cached): ``you -10,15 v2`` is the own position and speed, ``landmark: L0 30 NE``
+once (cached): ``you -10,15`` is the own position, ``landmark: L0 30 NE``
 an entity's id, distance in metres and compass point from the reader (``describe``). A
 message's position is such a distance and compass point too (left out when it reads the
 same as where its sender or target is seen), its other fields ``key=value``; its round is
@@ -61,9 +64,9 @@ SYSTEM_PROMPT = (
 )
 
 FORMAT = (
-    'How a round reads: "you N,E vS" is the observing UAV\'s position (metres north, east) '
-    'and speed (m/s); "landmark: L0 30 NE" lists what it senses by id, distance in metres '
-    "and compass direction from it; a message's position reads the same way (left out "
+    'How a round reads: "you N,E" is the observing UAV\'s position now (metres north, '
+    'east), after its past rounds; "landmark: L0 30 NE" lists what it senses by id, distance '
+    "in metres and compass direction from it; a message's position reads the same way (left out "
     'when it is where its sender or target is seen), and "rK" marks a message older than '
     "the last round."
 )
@@ -208,14 +211,56 @@ def _identity(request: DecisionRequest, limits: PromptLimits) -> str:
     return f"You are UAV {_safe_id(request.observation.uav, limits.max_id_chars)}.\n"
 
 
-def agent_part(request: DecisionRequest, limits: PromptLimits | None = None) -> str:
+def agent_part(
+    request: DecisionRequest, limits: PromptLimits | None = None, *, options_last: bool = False
+) -> str:
     """Who this agent is, its options and its own history: from round to round it grows
-    only at its end, except in a round whose options changed."""
+    only at its end, except in a round whose options changed. ``options_last`` puts the
+    options after the history (``OptionPlacement``: while they keep changing)."""
     limits = limits or PromptLimits()
-    parts = [OPTIONS_HEADER, candidate_lines(request.candidates)]
-    if request.history is not None:
-        parts += [HISTORY_HEADER, *request.history]
+    options = [OPTIONS_HEADER, candidate_lines(request.candidates)]
+    history = [] if request.history is None else [HISTORY_HEADER, *request.history]
+    parts = history + options if options_last else options + history
     return _identity(request, limits) + "\n".join(p for p in parts if p) + "\n"
+
+
+class OptionPlacement:
+    """Where one agent's options go, round by round (its selector keeps one).
+
+    Before the history they are cached while unchanged, but a change re-processes them and
+    the whole shown history; after it they are new text every round, but a change costs only
+    them. So they move after the history once they changed in ``enter`` of the last
+    ``window`` rounds (pursuers whose targets come and go), and back before it after
+    ``window`` rounds without a change (each move costs one re-processed history).
+    """
+
+    def __init__(self, window: int = 4, enter: int = 3) -> None:
+        self.window = window
+        self.enter = enter
+        self._episode: dict[str, int] = {}
+        self._last: dict[str, str] = {}
+        self._changes: dict[str, list[bool]] = {}
+        self._after: dict[str, bool] = {}
+
+    def options_last(self, request: DecisionRequest) -> bool:
+        """Whether this round's options go after the history (call once per decision)."""
+        uav, episode = request.observation.uav, request.observation.episode
+        text = candidate_lines(request.candidates)
+        if self._episode.get(uav) != episode:
+            self._episode[uav] = episode
+            self._last.pop(uav, None)
+            self._changes[uav] = []
+            self._after[uav] = False
+        last = self._last.get(uav)
+        self._last[uav] = text
+        changes = self._changes[uav]
+        changes.append(last is not None and last != text)
+        del changes[: -self.window]
+        if not self._after[uav] and sum(changes) >= self.enter:
+            self._after[uav] = True
+        elif self._after[uav] and len(changes) == self.window and not any(changes):
+            self._after[uav] = False
+        return self._after[uav]
 
 
 def answer_cue(candidates: Sequence[Candidate]) -> str:
@@ -230,7 +275,7 @@ def round_part(request: DecisionRequest, limits: PromptLimits | None = None) -> 
     """The per-round text: observation, peer messages (as data), answer cue."""
     limits = limits or PromptLimits()
     obs = request.observation
-    parts = [f"## Round {obs.round}", request.observation_text.strip() or "(nothing observed)"]
+    parts = [request.observation_text.strip() or "(nothing observed)"]
     messages = list(obs.messages)[-limits.max_messages :]
     dropped = len(obs.messages) - len(messages)
     if messages:
@@ -251,11 +296,13 @@ def build_messages(
     *,
     system_prompt: str = SYSTEM_PROMPT,
     limits: PromptLimits | None = None,
+    options_last: bool = False,
 ) -> list[dict[str, str]]:
     """Chat messages for one decision: static system message, then agent part + round part."""
+    user = agent_part(request, limits, options_last=options_last) + round_part(request, limits)
     return [
         {"role": "system", "content": static_part(request, system_prompt)},
-        {"role": "user", "content": agent_part(request, limits) + round_part(request, limits)},
+        {"role": "user", "content": user},
     ]
 
 

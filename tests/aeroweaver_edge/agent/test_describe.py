@@ -29,12 +29,12 @@ ENTITIES = (
 
 def test_the_prompt_reads_one_line_per_kind_of_entity_with_id_distance_and_bearing() -> None:
     assert describe(observation(ENTITIES)).splitlines() == [
-        "you -10,15 v5",
+        "you -10,15",
         "food (red): F1 20 S",
         "landmark: L0 40 NE, L1 30 W",
         "searcher: uav1 10 E, uav2 10 N",
     ]
-    assert describe(observation(())) == "you -10,15 v5\nnothing in range"
+    assert describe(observation(())) == "you -10,15\nnothing in range"
 
 
 def test_the_retrieval_text_keeps_one_entity_a_line_so_stored_experience_still_matches() -> None:

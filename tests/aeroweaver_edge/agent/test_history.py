@@ -42,16 +42,20 @@ def test_each_round_shows_the_earlier_rounds_with_their_rewards() -> None:
 
 def test_the_window_turns_over_in_blocks_so_text_only_grows_in_between() -> None:
     block = 4
-    shown = play(InteractionHistory(block=block), 0, range(20))
+    shown = play(InteractionHistory(block=block), 0, range(30))
     turnovers = []
-    for t in range(1, 20):
+    for t in range(1, 30):
         prev, now = shown[t - 1], shown[t]
         if now[: len(prev)] != prev:
             turnovers.append(t)
             assert now[0] == f"r{t - block} skill_{t - block}() {-(t - block)}"
-    assert turnovers == [8, 12, 16]  # 2 * block lines decided, then every block rounds
-    assert all(min(t, block) <= len(s) <= 2 * block - 1 for t, s in enumerate(shown))
-    assert shown[19][-1].startswith("r18 ")  # the newest line is always there
+    # 3 * block lines decided, then every 2 * block rounds: with the default block of 8 a
+    # 24-round episode never turns over (the README command's round 16 did, ~60 tokens a UAV)
+    assert turnovers == [12, 20, 28]
+    assert all(min(t, block) <= len(s) <= 3 * block - 1 for t, s in enumerate(shown))
+    assert shown[29][-1].startswith("r28 ")  # the newest line is always there
+    default = play(InteractionHistory(block=8), 0, range(24))
+    assert all(default[t][: len(default[t - 1])] == default[t - 1] for t in range(1, 24))
 
 
 def test_a_frozen_line_never_changes_even_if_its_reward_comes_late() -> None:

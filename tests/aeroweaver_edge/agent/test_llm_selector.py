@@ -8,7 +8,7 @@ from collections.abc import AsyncIterator
 import pytest
 
 from aeroweaver_edge.agent.llm_selector import LLMSelector
-from aeroweaver_edge.agent.prompt import build_messages
+from aeroweaver_edge.agent.prompt import HISTORY_HEADER, OPTIONS_HEADER, build_messages
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.client import ChatClient
@@ -346,3 +346,19 @@ async def test_probe_reports_two_token_letters_from_the_endpoint(fp: FakeProvide
         assert sel.label_budget == 0
     finally:
         await sel.aclose()
+
+
+async def test_options_that_keep_changing_are_sent_after_the_history(fp: FakeProvider) -> None:
+    """The selector places each UAV's options (``prompt.OptionPlacement``): before the
+    history while stable, after it from the third change in four rounds."""
+    sel = selector(fp, OK)
+    sets = [CANDIDATES, CANDIDATES[1:], CANDIDATES, CANDIDATES[1:]]
+    try:
+        for rnd, cands in enumerate(sets):
+            history = tuple(f"r{r} explore_local() -1" for r in range(rnd))
+            await sel.score(request(rnd, candidates=cands, history=history))
+    finally:
+        await sel.aclose()
+    users = [str(b["messages"][-1]["content"]) for b in fp.chat_bodies()]
+    after = [u.index(OPTIONS_HEADER) > u.index(HISTORY_HEADER) for u in users]
+    assert after == [False, False, False, True]

@@ -12,6 +12,7 @@ from aeroweaver_edge.agent.prompt import (
     HISTORY_HEADER,
     MESSAGES_HEADER,
     OPTIONS_HEADER,
+    OptionPlacement,
     PromptLimits,
     build_messages,
     compact_number,
@@ -108,7 +109,7 @@ def test_each_uav_prompt_only_grows_at_the_end_of_its_agent_part_within_a_block(
         req = request(rnd, history=lines, pos=(float(rnd) * 3.3, -2.0), messages=(moved,))
         messages = build_messages(req)
         user = messages[1]["content"]
-        agent = user[: user.index("## Round")]  # everything before the round part
+        agent = user[: user.index("\nyou ") + 1]  # everything before the round part
         prompts.append((messages[0]["content"] + "\n" + agent, flat(req)))
         history.record_decision(7, rnd, "explore_local()", True)
         history.record_reward(7, rnd, -0.5 * rnd)
@@ -129,15 +130,17 @@ def test_options_precede_the_history_and_the_round_part_ends_with_the_answer_cue
     assert text.startswith(
         f"You are UAV uav1.\n{OPTIONS_HEADER}\n{OPTIONS}\n{HISTORY_HEADER}\nr3 explore_local()"
     )
-    assert text.index(OPTIONS_HEADER) < text.index(HISTORY_HEADER) < text.index("## Round 4")
-    assert text.endswith("## Round 4\nyou 0,0 v5\nlandmark: L1 20 N\nAnswer (A-D):")
+    assert text.index(OPTIONS_HEADER) < text.index(HISTORY_HEADER) < text.index("\nyou 0,0")
+    # no round header: the newest history line says which round came before, and the
+    # speed is left out (no option depends on it)
+    assert text.endswith("-1\nyou 0,0\nlandmark: L1 20 N\nAnswer (A-D):")
 
 
 def test_no_history_section_when_history_is_off_but_an_empty_one_from_round_zero() -> None:
     off = build_messages(request(0, history=None))[-1]["content"]
     empty = build_messages(request(0, history=()))[-1]["content"]
     assert HISTORY_HEADER not in off
-    assert off.startswith(f"You are UAV uav1.\n{OPTIONS_HEADER}\n{OPTIONS}\n## Round 0")
+    assert off.startswith(f"You are UAV uav1.\n{OPTIONS_HEADER}\n{OPTIONS}\nyou 0,0\n")
     assert empty.startswith(f"You are UAV uav1.\n{OPTIONS_HEADER}\n{OPTIONS}\n{HISTORY_HEADER}\n")
 
 
@@ -148,9 +151,9 @@ def test_unchanged_options_keep_the_prompt_append_only_and_changed_ones_cost_the
     history = ("r0 explore_local() -1", "r1 cover_landmark(L1) -0.5")
     now = flat(request(2, history=history))
     later = flat(request(3, history=(*history, "r2 cover_landmark(L1) 0"), pos=(5.0, 0.0)))
-    prefix = now[: now.index("## Round 2")]
+    prefix = now[: now.index("\nyou ") + 1]
     assert later.startswith(prefix)
-    assert later[len(prefix) :].startswith("r2 cover_landmark(L1) 0\n## Round 3")
+    assert later[len(prefix) :].startswith("r2 cover_landmark(L1) 0\nyou 5,0\n")
     other = build_messages(replace(request(3, history=history), candidates=tuple(CANDIDATES[1:])))
     cut = flat(request(2, history=history)).index(OPTIONS_HEADER) + len(OPTIONS_HEADER) + 1
     assert "\n".join(m["content"] for m in other)[:cut] == now[:cut]
@@ -221,7 +224,7 @@ def test_peer_messages_are_lines_of_data_that_cannot_escape_their_block() -> Non
     ]
     lines = text.splitlines()
     assert [ln for ln in lines if ln.startswith("## ")] == [
-        OPTIONS_HEADER, "## Round 3", MESSAGES_HEADER
+        OPTIONS_HEADER, MESSAGES_HEADER
     ]  # fmt: skip  # a body cannot forge a header ...
     assert sum(ln.startswith("A. ") for ln in lines) == 1  # ... nor an option
     assert sum(ln.startswith("Answer (") for ln in lines) == 1  # ... nor the cue
@@ -269,3 +272,32 @@ def test_any_scalar_in_any_field_renders_as_one_bounded_line() -> None:
                 assert "\n" not in summary
                 assert len(line) <= limits.max_message_chars + 40
                 assert len(summary) < 300
+
+
+# ------------------------------------------------------------------ where the options go
+
+
+def test_options_last_puts_them_after_the_history_before_the_round_part() -> None:
+    history = ("r0 explore_local() -1",)
+    text = flat(request(1, history=history))
+    last = "\n".join(m["content"] for m in build_messages(request(1, history=history),
+                                                          options_last=True))  # fmt: skip
+    assert last.index(HISTORY_HEADER) < last.index(OPTIONS_HEADER) < last.index("\nyou 0,0")
+    assert sorted(last.splitlines()) == sorted(text.splitlines())  # the same lines, moved
+
+
+def test_options_move_after_the_history_while_they_keep_changing_and_back_when_stable() -> None:
+    placement = OptionPlacement(window=4, enter=3)
+    sets = [CANDIDATES, CANDIDATES[1:], CANDIDATES, CANDIDATES[1:], CANDIDATES[1:]]
+    sets += [CANDIDATES[1:]] * 4
+    other = request(0, uav="uav2")  # another UAV's rounds do not count for uav1
+    where = []
+    for rnd, cands in enumerate(sets):
+        where.append(placement.options_last(replace(request(rnd), candidates=tuple(cands))))
+        assert placement.options_last(replace(other, candidates=tuple(CANDIDATES))) is False
+    # changes in rounds 1, 2, 3: the third within 4 rounds moves them after the history;
+    # rounds 4..7 unchanged: after 4 stable rounds they go back before it
+    assert where == [False, False, False, True, True, True, True, False, False]
+    new_episode = replace(request(0), observation=replace(request(0).observation, episode=8))
+    placement.options_last(replace(new_episode, candidates=tuple(CANDIDATES[1:])))
+    assert placement.options_last(replace(request(0), candidates=tuple(CANDIDATES))) is False

@@ -15,6 +15,14 @@ from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 ROUNDS = 4
 
 
+def shown_history(r: RecordedRequest) -> list[str]:
+    """The history lines of a decision request (between its header and the observation;
+    options that moved after the history are not history lines)."""
+    user = str(r.body["messages"][-1]["content"])
+    part = user[user.index(HISTORY_HEADER) : user.index("\nyou ")].splitlines()[1:]
+    return [h for h in part if re.match(r"r\d+ ", h)]
+
+
 def decisions(fake: FakeProvider) -> list[RecordedRequest]:
     return [
         r
@@ -35,7 +43,7 @@ async def test_slots_history_and_cached_tokens_in_an_llm_swarm() -> None:
         seeds = [
             r.body["id_slot"]
             for r in fake.requests
-            if r.path.endswith("/chat/completions") and "## Round" not in str(r.body["messages"])
+            if r.path.endswith("/chat/completions") and "## Options" not in str(r.body["messages"])
             and "id_slot" in r.body
         ]  # fmt: skip
 
@@ -46,8 +54,8 @@ async def test_slots_history_and_cached_tokens_in_an_llm_swarm() -> None:
         uav = re.match(r"You are UAV (uav\d)\.", user)
         assert uav is not None
         assert r.body["id_slot"] == int(uav.group(1)[-1])  # uav<i> always in slot i
-        history = user[user.index(HISTORY_HEADER) : user.index("## Round")].splitlines()[1:]
-        rnd = int(re.search(r"## Round (\d+)", user).group(1))  # type: ignore[union-attr]
+        history = shown_history(r)
+        rnd = len(rounds_seen.get(uav.group(1), []))  # a UAV's requests come round by round
         assert [h.split()[0] for h in history] == [f"r{i}" for i in range(rnd)]  # its own past
         assert all(re.fullmatch(r"-?\d+(\.\d)?", h.split()[-1]) for h in history)  # + reward
         rounds_seen.setdefault(uav.group(1), []).append(rnd)
@@ -62,11 +70,11 @@ async def test_slots_history_and_cached_tokens_in_an_llm_swarm() -> None:
     # Round 0: the role's prefix was computed once before the episode and copied into every
     # slot, so even the first decisions reuse the system prompt and most of the agent part.
     system = len(made[0].body["messages"][0]["content"]) // 4
-    first = [r.cached_tokens or 0 for r in made if "## Round 0" in str(r.body["messages"])]
+    first = [r.cached_tokens or 0 for r in made if not shown_history(r)]
     assert len(first) == 3
     assert min(first) > system
     assert seeds == [0]  # one prefill for the one coverage role, in uav0's slot
     assert set(fake.slot_files) == {"seed-0.bin"}
     # From round 1 on each UAV's own prefix (system + agent part) comes from its slot.
-    later = [r.cached_tokens or 0 for r in made if "## Round 0" not in str(r.body["messages"])]
+    later = [r.cached_tokens or 0 for r in made if shown_history(r)]
     assert min(later) > system
