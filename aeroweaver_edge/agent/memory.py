@@ -113,7 +113,7 @@ from aeroweaver_edge.agent.memory_records import (
     skill_of,
     stored,
 )
-from aeroweaver_edge.agent.memory_returns import credited, peer_credit, return_at
+from aeroweaver_edge.agent.memory_returns import install_functions, peer_credit, return_at
 from aeroweaver_edge.agent.memory_senders import (
     MAX_BYTES_PER_SENDER,
     MAX_RECORDS_PER_SENDER,
@@ -183,6 +183,7 @@ class ExperienceMemory:
             durable=durable,
             required=required,
         )
+        install_functions(self._store.db)
 
     @classmethod
     def from_config(cls, cfg: AgentConfig, *, run: str | None = None) -> ExperienceMemory:
@@ -254,18 +255,26 @@ class ExperienceMemory:
         return self._store.guard(what, default, fn, write=write, own=own)
 
     @contextlib.contextmanager
-    def batch(self) -> Iterator[None]:
+    def batch(self, *, own: bool = True) -> Iterator[None]:
         """Many writes in one transaction (``Store.batch``): each write inside returns as
-        usual but is committed, and so acknowledged, only when the block ends. For bulk
-        intake (a peer's backlog, a restore, the bench's fill); a decision that must be
-        durable on return is written outside a batch. If the block fails the retrieval
-        index is reloaded from the table, so it never shows rolled-back rows."""
+        usual but is committed, and so acknowledged, only when the block ends, all or
+        nothing. For bulk intake (a peer's backlog, a restore, the bench's fill); a
+        decision that must be durable on return is written outside a batch. A database
+        failure rolls the block back and is handled like a failed write (``own=False``:
+        peers' records, logged and dropped even when the memory is required); the
+        retrieval index is then reloaded from the table, so it never shows rolled-back
+        rows."""
         try:
             with self._store.batch():
                 yield
-        except BaseException:
+        except BaseException as exc:
             self._groups.clear()
             self._caps.forget()
+            if isinstance(exc, sqlite3.Error) and not isinstance(
+                exc, (sqlite3.ProgrammingError, sqlite3.IntegrityError, sqlite3.InterfaceError)
+            ):
+                self._store.failed("batch", exc, own=own)
+                return
             raise
 
     def _group(self, task: str, role: str) -> Group:
@@ -396,37 +405,39 @@ class ExperienceMemory:
 
         def go() -> list[tuple[str, str, RunKey, float]] | None:
             with self._tx():
-                old = self._db.execute(
-                    "SELECT reward FROM rewards "
-                    "WHERE run = ? AND uav = ? AND episode = ? AND round = ?",
-                    (run, uav, episode, round),
-                ).fetchone()
-                if old is not None and old[0] == reward:
-                    return None
+                row = (run, uav, episode, round, reward, source)
+                # The usual case, a first delivery, is one statement; a repeat reads the
+                # old value to credit the difference.
+                old = None
+                if (
+                    self._db.execute(
+                        "INSERT OR IGNORE INTO rewards VALUES (?, ?, ?, ?, ?, ?)", row
+                    ).rowcount
+                    == 0
+                ):
+                    old = self._db.execute(
+                        "SELECT reward FROM rewards "
+                        "WHERE run = ? AND uav = ? AND episode = ? AND round = ?",
+                        (run, uav, episode, round),
+                    ).fetchone()
+                    if old is not None and old[0] == reward:
+                        return None
+                    self._db.execute(
+                        "INSERT OR REPLACE INTO rewards VALUES (?, ?, ?, ?, ?, ?)", row
+                    )
                 delta = reward - (old[0] if old is not None else 0.0)
-                self._db.execute(
-                    "INSERT OR REPLACE INTO rewards VALUES (?, ?, ?, ?, ?, ?)",
-                    (run, uav, episode, round, reward, source),
-                )
-                self._db.execute(
-                    "UPDATE records SET reward = ?, reward_source = ? WHERE run = ? AND uav = ? "
-                    "AND episode = ? AND round = ? AND origin = ''",
-                    (reward, source, run, uav, episode, round),
-                )
+                # One statement: r_round on its own record, G_t of every t <= round
+                # credited (``credited``, the same Python arithmetic, as an SQL function).
                 rows = self._db.execute(
-                    "SELECT seq, task, role, round, ret FROM records "
-                    "WHERE run = ? AND uav = ? AND episode = ? AND round <= ? AND origin = ''",
-                    (run, uav, episode, round),
+                    "UPDATE records SET "
+                    "reward = CASE WHEN round = ?1 THEN ?2 ELSE reward END, "
+                    "reward_source = CASE WHEN round = ?1 THEN ?3 ELSE reward_source END, "
+                    "ret = aw_credited(?4, ret, round, ?1, ?5) "
+                    "WHERE run = ?6 AND uav = ?7 AND episode = ?8 AND round <= ?1 "
+                    "AND origin = '' RETURNING task, role, round, ret",
+                    (round, reward, source, self.gamma, delta, run, uav, episode),
                 ).fetchall()
-                g = self.gamma
-                updates = [
-                    (task, role, (run, uav, episode, t), credited(g, ret, t, round, delta))
-                    for _, task, role, t, ret in rows
-                ]
-                self._db.executemany(
-                    "UPDATE records SET ret = ? WHERE seq = ?",
-                    [(u[3], row[0]) for u, row in zip(updates, rows, strict=True)],
-                )
+                updates = [(task, role, (run, uav, episode, t), ret) for task, role, t, ret in rows]
                 return updates
 
         updates = self._guard("add_reward", None, go)
@@ -638,8 +649,10 @@ class ExperienceMemory:
     def ingest_many(self, records: Iterable[ExperienceRecord]) -> int:
         """``ingest`` each record in one transaction (a peer's backlog, a late joiner's
         fetch): committed together when all are stored. Returns how many changed."""
-        with self.batch():
-            return sum(1 for record in records if self.ingest(record))
+        changed = 0
+        with self.batch(own=False):
+            changed = sum(1 for record in records if self.ingest(record))
+        return changed
 
     def _forget_evicted(self, evicted: list[tuple[str, str, RunKey]]) -> None:
         """Drop evicted records from the retrieval index; rebuild a group once half dead."""

@@ -30,6 +30,17 @@ def credited(gamma: float, ret: float | None, t: int, rnd: int, delta: float) ->
     return (ret or 0.0) + gamma ** (rnd - t) * delta
 
 
+def install_functions(db: sqlite3.Connection) -> None:
+    """``aw_credited(gamma, ret, t, round, delta)`` = ``credited`` inside SQL, so a reward
+    credits its trajectory in one UPDATE with exactly this module's float arithmetic."""
+    db.create_function(
+        "aw_credited",
+        5,
+        lambda gamma, ret, t, rnd, delta: credited(gamma, ret, t, rnd, delta),
+        deterministic=True,
+    )
+
+
 def peer_credit(
     gamma: float, ret: float | None, s: int, rewards: Sequence[tuple[int, float]]
 ) -> float | None:
@@ -57,4 +68,4 @@ def recompute_returns(db: sqlite3.Connection, gamma: float) -> None:
     )
 
 
-__all__ = ["credited", "peer_credit", "recompute_returns", "return_at"]
+__all__ = ["credited", "install_functions", "peer_credit", "recompute_returns", "return_at"]

@@ -295,18 +295,9 @@ class Store:
         """One write transaction. IMMEDIATE takes the write lock up front, so a concurrent
         writer waits on the busy timeout instead of failing half-way (WAL cannot upgrade
         a read snapshot to a write without risking SQLITE_BUSY_SNAPSHOT). Inside ``batch``
-        it is a savepoint of the batch's transaction: a failed write undoes only itself."""
+        it joins the batch's transaction (which then commits or fails whole)."""
         if self._batch:
-            self.db.execute("SAVEPOINT w")
-            try:
-                yield
-            except BaseException:
-                if self.db.in_transaction:
-                    with contextlib.suppress(sqlite3.Error):
-                        self.db.execute("ROLLBACK TO w")
-                        self.db.execute("RELEASE w")
-                raise
-            self.db.execute("RELEASE w")
+            yield
             return
         self.db.execute("BEGIN IMMEDIATE")
         try:
@@ -321,9 +312,10 @@ class Store:
     @contextlib.contextmanager
     def batch(self) -> Iterator[None]:
         """Many writes in one transaction: nothing of the block is acknowledged (durable)
-        until it ends, then all of it at once. For bulk intake (a peer's backlog, a
-        restore, the bench's fill), never for a decision that must be durable on return.
-        A block that raises rolls back whole; nested blocks join the outer one."""
+        until it ends, then all of it at once; a failure anywhere rolls back all of it
+        (``guard`` lets a database error inside a batch through to here). For bulk intake
+        (a peer's backlog, a restore, the bench's fill), never for a decision that must be
+        durable on return. Nested blocks join the outer one."""
         if self._batch:
             self._batch += 1
             try:
@@ -342,7 +334,13 @@ class Store:
                     self.db.execute("ROLLBACK")
             raise
         self._batch = 0
-        self.db.execute("COMMIT")
+        try:
+            self.db.execute("COMMIT")
+        except BaseException:
+            if self.db.in_transaction:
+                with contextlib.suppress(sqlite3.Error):
+                    self.db.execute("ROLLBACK")
+            raise
 
     def guard(
         self, what: str, default: T, fn: Callable[[], T], *, write: bool = True, own: bool = True
@@ -356,6 +354,8 @@ class Store:
         except (sqlite3.ProgrammingError, sqlite3.IntegrityError, sqlite3.InterfaceError):
             raise
         except sqlite3.Error as exc:
+            if self._batch:
+                raise  # the batch fails whole: its owner applies this policy once
             if write:
                 self.write_errors += 1
             if write and own and self.required:
@@ -372,6 +372,14 @@ class Store:
                     self.write_errors,
                 )
             return default
+
+    def failed(self, what: str, exc: sqlite3.Error, *, own: bool = True) -> None:
+        """``guard``'s policy for a write that already failed (a whole batch)."""
+
+        def again() -> None:
+            raise exc
+
+        self.guard(what, None, again, own=own)
 
     def close(self) -> None:
         with contextlib.suppress(sqlite3.Error):
