@@ -17,7 +17,7 @@ compute exactly that, with the same float similarities ``c / (size + q - c)``:
     the group (the per-sender share cap needs the whole order).
 ``select_indexed``
     numpy, for large groups. Overlaps are counted in ``uint8``/``uint16``: a token held by
-    at least 1/8 of the group adds a cached dense 0/1 column (one vectorised add, no
+    at least 1/16 of the group adds a cached dense 0/1 column (one vectorised add, no
     scatter), a rarer one increments its postings. Then a count bound prunes: a record
     with overlap c has Jaccard at most c / q (q = query tokens, as size >= c), so once K
     eligible records with overlap >= T give a K-th best similarity theta with
@@ -43,8 +43,12 @@ if TYPE_CHECKING:
 SMALL_GROUP: Final = 2048
 """Largest (task, role) group scored in plain Python; larger ones use numpy."""
 
-DENSE_FRACTION: Final = 8
-"""A token held by at least 1/DENSE_FRACTION of a group gets a dense 0/1 column."""
+DENSE_FRACTION: Final = 16
+"""A token held by at least 1/DENSE_FRACTION of a group gets a dense 0/1 column (one byte
+per record: adding it costs less than incrementing that many scattered positions)."""
+
+WINDOW: Final = 3
+"""Count levels one pass over the group collects while the threshold steps down."""
 
 Selection = tuple[list[int], list[float]]  # positions best first, their similarities
 
@@ -311,9 +315,15 @@ def select_indexed(group: Group, tokens: frozenset[str], k: int, finalised_only:
     # c <= everywhere + t - 1, so Jaccard <= (everywhere + t - 1) / q.
     floor = 1 if everywhere == 0 else 0  # c >= 1: at least one shared token
     t = max(floor, int(counts.max()))
+    lo = n + 1  # ``pool``: the eligible records with counts >= lo (none yet)
+    pool = sub = np.zeros(0, dtype=np.intp)
     while True:
-        cand = np.flatnonzero(counts >= t) if t > 0 else np.arange(n)
-        cand = cand[_eligible_np(group, cand, finalised_only)]
+        if t < lo:  # one pass over the group: a few levels at once while stepping down
+            lo = max(floor, t - WINDOW)
+            pool = np.flatnonzero(counts >= lo) if lo > 0 else np.arange(n)
+            pool = pool[_eligible_np(group, pool, finalised_only)]
+            sub = counts[pool]
+        cand = pool[sub >= t] if t > lo else pool
         ci = everywhere + counts[cand].astype(np.int64)
         den = size[cand] + q - ci
         sim = ci / den
@@ -323,12 +333,25 @@ def select_indexed(group: Group, tokens: frozenset[str], k: int, finalised_only:
             t -= 1
             continue
         j = int(np.argpartition(sim, cand.size - k)[cand.size - k])  # the K-th best
+        best_c, best_d = int(ci[j]), int(den[j])
         # The largest t' whose excluded records all stay strictly below the K-th best,
-        # in integers: everywhere + t' - 1 < ci[j] * q / den[j].
-        need = -(-int(ci[j]) * q // int(den[j])) - everywhere
+        # in integers: everywhere + t' - 1 < best_c * q / best_d.
+        need = -(-best_c * q // best_d) - everywhere
         if need >= t:
             break
+        # One last pass at t' = need. The K-th best only improves as records join, so a
+        # record below the current one (compared exactly, ties kept) cannot make the top
+        # K: only the others are checked for eligibility and scored.
         t = max(floor, need)
+        cand = np.flatnonzero(counts >= t) if t > 0 else np.arange(n)
+        ci = everywhere + counts[cand].astype(np.int64)
+        den = size[cand] + q - ci
+        keep = ci * best_d >= best_c * den
+        cand, ci, den = cand[keep], ci[keep], den[keep]
+        ok = _eligible_np(group, cand, finalised_only)
+        cand, ci, den = cand[ok], ci[ok], den[ok]
+        sim = ci / den
+        break
     if cand.size == 0:
         return [], []
     return _top(cand, sim, k)
