@@ -133,6 +133,10 @@ class AsyncExperienceMemory:
     async def ingest(self, record: ExperienceRecord) -> bool:
         return await self._run(lambda: self._mem.ingest(record))
 
+    async def ingest_many(self, records: Iterable[ExperienceRecord]) -> int:
+        batch = list(records)  # materialise here: the iterable may not be thread-safe
+        return await self._run(lambda: self._mem.ingest_many(batch))
+
     async def credit_peer(self, record: ExperienceRecord) -> int:
         return await self._run(lambda: self._mem.credit_peer(record))
 

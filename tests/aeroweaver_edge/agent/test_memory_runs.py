@@ -508,3 +508,14 @@ def test_a_failed_batch_rolls_back_whole(tmp_path: Path) -> None:
         assert m.write_errors == 2
         assert [r.round for r in m.records(T, R)] == [0]
         assert [n.key for n in m.neighbourhood_of(T, R, "landmark")] == [("u1", 0, 0)]
+
+
+async def test_async_ingest_many_runs_in_the_memory_thread(tmp_path: Path) -> None:
+    mem = await AsyncExperienceMemory.open(tmp_path / "m.sqlite3")
+    try:
+        records = (_peer_record(i, f"landmark l{i}") for i in range(5))  # a generator
+        assert await mem.ingest_many(records) == 5
+        assert await mem.ingest_many([_peer_record(0, "landmark l0")]) == 0  # same version
+        assert await mem.count() == 5
+    finally:
+        await mem.aclose()
