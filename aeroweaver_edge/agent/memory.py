@@ -97,6 +97,7 @@ from aeroweaver_edge.agent.memory_index import (
     SMALL_GROUP,
     Group,
     Selection,
+    prepare,
     select_indexed,
     select_python,
     select_scan,
@@ -309,6 +310,8 @@ class ExperienceMemory:
                 ):
                     if (run, uav, episode) in book.members:
                         book.reward((run, uav, episode, rnd), rw)
+            if len(group) > SMALL_GROUP:
+                prepare(group)
             self._groups[(task, role)] = group
         return group
 

@@ -285,6 +285,18 @@ def _dense(group: Group, tok: str, plist: array[int], n: int) -> np.ndarray:
     return full[:n]
 
 
+def prepare(group: Group) -> int:
+    """Build the dense columns of every frequent token now (a group loaded for a daemon's
+    role), so the first queries do not pay for them. Returns the columns built."""
+    n = len(group)
+    built = 0
+    for tok, plist in group.postings.items():
+        if len(plist) < n and len(plist) * DENSE_FRACTION >= n:
+            _dense(group, tok, plist, n)
+            built += 1
+    return built
+
+
 def select_indexed(group: Group, tokens: frozenset[str], k: int, finalised_only: bool) -> Selection:
     import numpy as np
 
@@ -363,6 +375,7 @@ __all__ = [
     "Group",
     "Selection",
     "eligible",
+    "prepare",
     "select_indexed",
     "select_python",
     "select_scan",

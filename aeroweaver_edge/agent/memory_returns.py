@@ -33,12 +33,7 @@ def credited(gamma: float, ret: float | None, t: int, rnd: int, delta: float) ->
 def install_functions(db: sqlite3.Connection) -> None:
     """``aw_credited(gamma, ret, t, round, delta)`` = ``credited`` inside SQL, so a reward
     credits its trajectory in one UPDATE with exactly this module's float arithmetic."""
-    db.create_function(
-        "aw_credited",
-        5,
-        lambda gamma, ret, t, rnd, delta: credited(gamma, ret, t, rnd, delta),
-        deterministic=True,
-    )
+    db.create_function("aw_credited", 5, credited, deterministic=True)
 
 
 def peer_credit(

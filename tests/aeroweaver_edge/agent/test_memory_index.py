@@ -22,6 +22,7 @@ from aeroweaver_edge.agent.memory_index import (
     Group,
     Selection,
     eligible,
+    prepare,
     select_indexed,
     select_python,
     select_scan,
@@ -117,6 +118,22 @@ def test_dense_columns_follow_a_growing_group() -> None:
         for i in rng.sample(range(len(group)), 50):
             group.remove(group.keys[i])
     assert group.dense  # the frequent tokens did use the cached columns
+
+
+def test_prepared_columns_select_the_same() -> None:
+    """``prepare`` (run when a large group is loaded) builds every frequent token's column
+    up front; the selections are unchanged, also after the group grows."""
+    rng = random.Random(8)
+    vocab = [f"t{j}" for j in range(30)]
+    group, sets = random_group(rng, 4000, vocab)
+    assert prepare(group) == len(group.dense) > 0
+    for i in range(4000, 4500):
+        tokens = frozenset(rng.sample(vocab, 4))
+        group.add(("r", "u", 9, i), i, tokens, "a", 1.0, True)
+        sets.append(tokens)
+    for _ in range(30):
+        query = random_query(rng, vocab)
+        assert select_indexed(group, query, 32, False) == brute(group, sets, query, 32, False)
 
 
 def test_a_token_that_becomes_rare_drops_its_column() -> None:
