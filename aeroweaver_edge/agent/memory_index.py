@@ -326,7 +326,8 @@ def select_indexed(group: Group, tokens: frozenset[str], k: int, finalised_only:
     # Overlap c = everywhere + counts. Records below a count threshold t have
     # c <= everywhere + t - 1, so Jaccard <= (everywhere + t - 1) / q.
     floor = 1 if everywhere == 0 else 0  # c >= 1: at least one shared token
-    t = max(floor, int(counts.max()))
+    top = int(counts.max())
+    t = max(floor, top)
     lo = n + 1  # ``pool``: the eligible records with counts >= lo (none yet)
     pool = sub = np.zeros(0, dtype=np.intp)
     while True:
@@ -353,16 +354,19 @@ def select_indexed(group: Group, tokens: frozenset[str], k: int, finalised_only:
             break
         # One last pass at t' = need. The K-th best only improves as records join, so a
         # record below the current one (compared exactly, ties kept) cannot make the top
-        # K: only the others are checked for eligibility and scored.
+        # K. Per count c that is a largest size: c' = everywhere + c overlaps with size s
+        # reach best_c / best_d iff s <= (c' * best_d - best_c * (q - c')) / best_c.
         t = max(floor, need)
+        limit = np.full(top + 1, -1, dtype=np.int64)
+        for c in range(t, top + 1):
+            cc = everywhere + c
+            if cc > 0:
+                limit[c] = (cc * best_d - best_c * (q - cc)) // best_c
         cand = np.flatnonzero(counts >= t) if t > 0 else np.arange(n)
+        cand = cand[size[cand] <= limit[counts[cand]]]
+        cand = cand[_eligible_np(group, cand, finalised_only)]
         ci = everywhere + counts[cand].astype(np.int64)
-        den = size[cand] + q - ci
-        keep = ci * best_d >= best_c * den
-        cand, ci, den = cand[keep], ci[keep], den[keep]
-        ok = _eligible_np(group, cand, finalised_only)
-        cand, ci, den = cand[ok], ci[ok], den[ok]
-        sim = ci / den
+        sim = ci / (size[cand] + q - ci)
         break
     if cand.size == 0:
         return [], []
