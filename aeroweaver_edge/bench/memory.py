@@ -21,6 +21,7 @@ import json
 import math
 import random
 import statistics
+import sys
 import tempfile
 import time
 from collections.abc import Sequence
@@ -173,7 +174,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if args.records < 1 or args.queries < 1:
-        parser.error("--records and --queries must be at least 1")
+        print("bench memory: --records and --queries must be at least 1", file=sys.stderr)
+        return 2
     print(json.dumps(run(args.records, args.queries, args.seed, per_write=args.per_write)))
     return 0
 

@@ -815,10 +815,11 @@ def test_bench_per_write_and_bad_counts(capsys: pytest.CaptureFixture[str]) -> N
     assert bench.main(["--records", "80", "--queries", "3", "--per-write"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert (result["records"], result["transactions"]) == (80, "per write")
-    with pytest.raises(SystemExit) as exc:
-        bench.main(["--records", "0"])
-    assert exc.value.code == 2
-    assert "--records and --queries must be at least 1" in capsys.readouterr().err
+    for argv in (["--records", "0"], ["--queries", "-1"]):
+        assert bench.main(argv) == 2
+        assert capsys.readouterr().err == (
+            "bench memory: --records and --queries must be at least 1\n"
+        )
 
 
 def test_bench_fill_stores_the_same_records_batched_or_not(tmp_path: Path) -> None:
