@@ -2,8 +2,11 @@
 
 ``python -m aeroweaver_edge.bench.memory --records N`` fills a temporary on-disk memory
 with N synthetic coverage records in one (task, role) through the public API (append,
-a reward per round, finalise per episode: the daemon's write path), reopens it as a
-restarted daemon would, and times ``advantages`` for fresh states. Prints one JSON line.
+a reward per round, finalise per trajectory: the daemon's write path; one transaction per
+episode, or per write with ``--per-write``), reopens it as a restarted daemon would, and
+times ``advantages`` for fresh states. Prints one JSON line. ``fill_s`` and
+``inserts_per_s`` count the time inside the memory's API only, not the generation of the
+synthetic states (before 2026-12-03 they did, and every write was its own transaction).
 
 The states imitate a searcher's view of the coverage task (own pose, landmarks and peers
 within sensing range with offsets and distances, peer messages, round), so token sets,
@@ -13,10 +16,12 @@ vocabulary size and posting-list lengths are realistic, not best case.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import random
 import statistics
+import sys
 import tempfile
 import time
 from collections.abc import Sequence
@@ -65,18 +70,32 @@ def _reward(rng: random.Random, invocation: str) -> float:
     return base.get(invocation.split("(")[0], -0.9) + rng.gauss(0.0, 0.3)
 
 
-def fill(memory: ExperienceMemory, records: int, rng: random.Random) -> None:
-    """Append ``records`` decisions, reward each round and finalise each trajectory."""
+def fill(
+    memory: ExperienceMemory, records: int, rng: random.Random, *, per_write: bool = False
+) -> float:
+    """Append ``records`` decisions, reward each round and finalise each trajectory, one
+    episode (3 UAVs x 24 rounds) at a time. Returns the seconds spent inside the memory's
+    API: each episode's synthetic states are generated before its writes, untimed.
+
+    By default an episode's writes share one transaction (``ExperienceMemory.batch``, how
+    bulk intake writes); ``per_write`` commits each write on its own, as a daemon does for
+    the decision it must not lose."""
     done = 0
     episode = 0
+    spent = 0.0
     while done < records:
         episode += 1
+        plan: list[tuple[str, int, str, str, float]] = []
         for uav in UAVS:
             for rnd in range(ROUNDS):
-                if done >= records:
+                if done + len(plan) >= records:
                     break
                 text, options = _state(rng, uav, rnd)
                 inv = rng.choice(options)
+                plan.append((uav, rnd, text, inv, _reward(rng, inv)))
+        t0 = time.perf_counter()
+        with contextlib.nullcontext() if per_write else memory.batch():
+            for i, (uav, rnd, text, inv, reward) in enumerate(plan):
                 memory.append(
                     task=TASK,
                     role=ROLE,
@@ -87,9 +106,12 @@ def fill(memory: ExperienceMemory, records: int, rng: random.Random) -> None:
                     skill=inv.split("(")[0],
                     invocation=inv,
                 )
-                memory.add_reward(uav, episode, rnd, _reward(rng, inv), "bench")
-                done += 1
-            memory.finalise(uav, episode)
+                memory.add_reward(uav, episode, rnd, reward, "bench")
+                if i + 1 == len(plan) or plan[i + 1][0] != uav:
+                    memory.finalise(uav, episode)
+        spent += time.perf_counter() - t0
+        done += len(plan)
+    return spent
 
 
 def _percentile(values: Sequence[float], q: float) -> float:
@@ -97,17 +119,17 @@ def _percentile(values: Sequence[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
 
 
-def run(records: int, queries: int = 200, seed: int = 0) -> dict[str, Any]:
+def run(
+    records: int, queries: int = 200, seed: int = 0, *, per_write: bool = False
+) -> dict[str, Any]:
     """Fill, reopen and query a temporary memory; figures in ms, s and bytes."""
     if records < 1 or queries < 1:
         raise ValueError("records and queries must be at least 1")
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="aw-bench-memory-") as tmp:
         path = Path(tmp) / "memory.sqlite"
-        t0 = time.perf_counter()
         with ExperienceMemory(path) as memory:
-            fill(memory, records, rng)
-        fill_s = time.perf_counter() - t0
+            fill_s = fill(memory, records, rng, per_write=per_write)
         db_bytes = sum(p.stat().st_size for p in Path(tmp).iterdir())
 
         t0 = time.perf_counter()
@@ -131,6 +153,7 @@ def run(records: int, queries: int = 200, seed: int = 0) -> dict[str, Any]:
         "max_ms": round(max(latencies), 3),
         "fill_s": round(fill_s, 3),
         "inserts_per_s": round(records / fill_s, 1),
+        "transactions": "per write" if per_write else "per episode",
         "open_s": round(opened_s, 3),
         "index_build_s": round(index_s, 3),
         "db_bytes": db_bytes,
@@ -144,8 +167,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--records", type=int, default=10_000, help="records in one role")
     parser.add_argument("--queries", type=int, default=200, help="timed retrievals")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--per-write",
+        action="store_true",
+        help="commit every write on its own (a daemon's decisions) instead of per episode",
+    )
     args = parser.parse_args(argv)
-    print(json.dumps(run(args.records, args.queries, args.seed)))
+    if args.records < 1 or args.queries < 1:
+        print("bench memory: --records and --queries must be at least 1", file=sys.stderr)
+        return 2
+    print(json.dumps(run(args.records, args.queries, args.seed, per_write=args.per_write)))
     return 0
 
 

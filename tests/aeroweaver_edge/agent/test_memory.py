@@ -806,6 +806,35 @@ def test_bench_runs_and_prints_one_json_line(capsys: pytest.CaptureFixture[str])
     assert result["records"] == 150
     assert {"p50_ms", "p99_ms", "fill_s", "db_bytes"} <= result.keys()
     assert result["db_bytes"] > 0
+    assert result["transactions"] == "per episode"
+
+
+def test_bench_per_write_and_bad_counts(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--per-write`` commits each write alone and stores the same records; a count
+    below 1 is a usage error (exit 2, one line), not a traceback."""
+    assert bench.main(["--records", "80", "--queries", "3", "--per-write"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert (result["records"], result["transactions"]) == (80, "per write")
+    for argv in (["--records", "0"], ["--queries", "-1"]):
+        assert bench.main(argv) == 2
+        assert capsys.readouterr().err == (
+            "bench memory: --records and --queries must be at least 1\n"
+        )
+
+
+def test_bench_fill_stores_the_same_records_batched_or_not(tmp_path: Path) -> None:
+    """One transaction per episode is only faster: the rows and returns are those of one
+    transaction per write."""
+    import random
+
+    rows = []
+    for per_write in (False, True):
+        with ExperienceMemory(tmp_path / f"{per_write}.sqlite", run="r") as mem:
+            bench.fill(mem, 100, random.Random(4), per_write=per_write)
+            rows.append([(r.uav, r.episode, r.round, r.ret, r.final, r.state_text)
+                         for r in mem.records(bench.TASK, bench.ROLE)])  # fmt: skip
+    assert len(rows[0]) == 100
+    assert rows[0] == rows[1]
 
 
 @pytest.mark.parametrize("finalised_only", [False, True])

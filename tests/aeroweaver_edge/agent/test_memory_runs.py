@@ -448,3 +448,74 @@ def test_kill_9_during_concurrent_writes_loses_nothing_acknowledged() -> None:
     assert result["quarantined"] == 0
     assert 0 <= result["records_in_flight"] <= 10
     assert not math.isnan(result["wall_s"])
+
+
+def _peer_record(i: int, text: str) -> ExperienceRecord:
+    return ExperienceRecord(
+        h=Header(sender="uav9", epoch=1, seq=i + 1, stamp=0.0), task=T, role=R, uav="uav9",
+        episode=0, round=i, state_text=text, skill="cover", invocation="cover()", ret=1.0,
+        reward=1.0, final=True, run="peer",
+    )  # fmt: skip
+
+
+def test_a_batch_commits_whole_and_matches_single_writes(tmp_path: Path) -> None:
+    """A batch stores what the same writes store one transaction each (rows and returns),
+    and another connection sees none of it until the block ends."""
+    path = tmp_path / "a.sqlite3"
+    with (
+        ExperienceMemory(path, run="r") as batched,
+        ExperienceMemory(tmp_path / "b.sqlite3", run="r") as single,
+    ):
+        with batched.batch():
+            episode(batched, "u1", 0, [1.0, -0.5, 2.0], "a")
+            assert batched.ingest_many([_peer_record(i, f"landmark l{i}") for i in range(3)]) == 3
+            other = sqlite3.connect(path)
+            assert other.execute("SELECT count(*) FROM records").fetchone()[0] == 0
+            other.close()
+        episode(single, "u1", 0, [1.0, -0.5, 2.0], "a")
+        for i in range(3):
+            single.ingest(_peer_record(i, f"landmark l{i}"))
+        assert [(r.uav, r.round, r.ret, r.final) for r in batched.records(T, R)] == [
+            (r.uav, r.round, r.ret, r.final) for r in single.records(T, R)
+        ]
+        assert batched.advantages(T, R, "landmark l1", ["a", "cover"]) == single.advantages(
+            T, R, "landmark l1", ["a", "cover"]
+        )
+
+
+def test_a_failed_batch_rolls_back_whole(tmp_path: Path) -> None:
+    """Disk full inside a batch: nothing of the block stays, the index forgets it too, the
+    error counts once; a required memory stops for its own writes, and a peers' batch
+    (``ingest_many``) is dropped without stopping it."""
+    with ExperienceMemory(tmp_path / "m.sqlite3", required=True, run="r") as m:
+        episode(m, "u1", 0, [1.0], "a")
+        m.warm(T, R)
+        pages = m._db.execute("PRAGMA page_count").fetchone()[0]
+        m._db.execute(f"PRAGMA max_page_count = {pages}")
+        big = "landmark " + "filler " * 4000
+        peers = [_peer_record(i, f"landmark {i} " + "filler " * 500) for i in range(60)]
+        assert m.ingest_many(peers) == 0
+        assert m.write_errors == 1
+
+        def fill() -> None:
+            with m.batch():
+                for t in range(1, 40):
+                    m.append(task=T, role=R, uav="u1", episode=0, round=t,
+                             state_text=big + str(t), skill="b", invocation="b()")  # fmt: skip
+
+        with pytest.raises(MemoryUnavailable, match="batch failed"):
+            fill()
+        assert m.write_errors == 2
+        assert [r.round for r in m.records(T, R)] == [0]
+        assert [n.key for n in m.neighbourhood_of(T, R, "landmark")] == [("u1", 0, 0)]
+
+
+async def test_async_ingest_many_runs_in_the_memory_thread(tmp_path: Path) -> None:
+    mem = await AsyncExperienceMemory.open(tmp_path / "m.sqlite3")
+    try:
+        records = (_peer_record(i, f"landmark l{i}") for i in range(5))  # a generator
+        assert await mem.ingest_many(records) == 5
+        assert await mem.ingest_many([_peer_record(0, "landmark l0")]) == 0  # same version
+        assert await mem.count() == 5
+    finally:
+        await mem.aclose()
