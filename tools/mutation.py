@@ -113,8 +113,20 @@ TARGETS: tuple[Target, ...] = (
     ),
     Target(
         "memory",
-        ("aeroweaver_edge/agent/memory.py",),
-        (f"{T}agent/test_memory.py", f"{T}agent/test_memory_runs.py", f"{T}test_cli_memory.py"),
+        (
+            "aeroweaver_edge/agent/memory.py",
+            "aeroweaver_edge/agent/memory_store.py",
+            "aeroweaver_edge/agent/memory_index.py",
+            "aeroweaver_edge/agent/memory_returns.py",
+            "aeroweaver_edge/agent/memory_senders.py",
+        ),
+        (
+            f"{T}agent/test_memory.py",
+            f"{T}agent/test_memory_runs.py",
+            f"{T}agent/test_memory_index.py",
+            f"{T}agent/test_memory_senders.py",
+            f"{T}test_cli_memory.py",
+        ),
         15,
     ),
     Target(
