@@ -91,7 +91,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final, Literal, TypeVar
 
-from aeroweaver_edge.agent.estimators import PAPER, Estimator, HorizonBook, estimator_from_env
+from aeroweaver_edge.agent.estimators import PAPER, Estimator, HorizonBook
 from aeroweaver_edge.agent.state_tokens import TOKENIZER_VERSION, tokenise
 from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.wire import MAX_TEXT, ExperienceRecord, Header
@@ -403,7 +403,7 @@ class ExperienceMemory:
             finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
-            estimator=estimator_from_env(),
+            estimator=Estimator.parse(cfg.estimator),
         )
 
     # ------------------------------------------------------------------ opening
@@ -1401,7 +1401,7 @@ class AsyncExperienceMemory:
             finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
-            estimator=estimator_from_env(),
+            estimator=Estimator.parse(cfg.estimator),
         )
 
     @property
