@@ -22,7 +22,10 @@ its eligible records in the neighbourhood): a skill seen twice no longer outvote
 twenty times. ``scale`` expresses advantages in units of the neighbourhood's spread (its
 values' standard deviation, at least ``SCALE_FLOOR``), so the push ``beta * A`` does not
 depend on a task's reward scale: raw H-step returns differ by hundredths in one task and
-by tens in another, against base gaps of a few nats in both.
+by tens in another, against base gaps of a few nats in both. ``tscore`` (instead of
+``scale``) counts in standard errors of the skill's mean, ``A * sqrt(n) / sd``: the push
+grows with the evidence behind it, so a difference seen in twenty records outweighs the
+same difference seen in one.
 
 ``support:M`` (a remedy of this project, combinable: ``horizon:3,support:4``) is against
 thin evidence: a skill with fewer than M eligible records in the neighbourhood gets no
@@ -54,8 +57,8 @@ Traj = tuple[str, str, int]  # (run, uav, episode)
 RunKey = tuple[str, str, int, int]  # (run, uav, episode, round)
 
 _USAGE = (
-    "expected paper, horizon:H, support:M, shrink:K, scale or centre (with a horizon), or a "
-    "comma-joined mix (horizon:3,centre,scale)"
+    "expected paper, horizon:H, support:M, shrink:K, scale, tscore or centre (with a "
+    "horizon), or a comma-joined mix (horizon:3,centre,scale)"
 )
 SCALE_FLOOR: Final = 1e-3  # ``scale``: a neighbourhood whose values spread less is "no evidence"
 
@@ -69,6 +72,7 @@ class Estimator:
     centre: bool = False  # subtract the per-round mean H-step return of the group
     shrink: int = 0  # a skill's advantage times n / (n + shrink): thin evidence says less
     scale: bool = False  # advantages in units of the neighbourhood's spread of values
+    tscore: bool = False  # ... in units of the standard error of the skill's mean
 
     @property
     def name(self) -> str:
@@ -81,6 +85,8 @@ class Estimator:
             parts.append(f"shrink:{self.shrink}")
         if self.scale:
             parts.append("scale")
+        if self.tscore:
+            parts.append("tscore")
         return ",".join(parts) or "paper"
 
     @property
@@ -94,7 +100,7 @@ class Estimator:
         horizon: int | None = None
         support = 1
         shrink = 0
-        centre = scale = False
+        centre = scale = tscore = False
         parts = [p.strip() for p in text.split(",")]
         if not text.strip() or any(not p for p in parts):
             raise ValueError(f"estimator {text!r}: {_USAGE}")
@@ -107,6 +113,9 @@ class Estimator:
                 continue
             if kind == "scale" and not arg:
                 scale = True
+                continue
+            if kind == "tscore" and not arg:
+                tscore = True
                 continue
             if kind not in ("horizon", "support", "shrink"):
                 raise ValueError(f"estimator {text!r}: unknown part {part!r}; {_USAGE}")
@@ -124,7 +133,9 @@ class Estimator:
                 shrink = n
         if centre and horizon is None:
             raise ValueError(f"estimator {text!r}: centre needs a horizon (horizon:3,centre)")
-        return cls(horizon, support, centre, shrink, scale)
+        if scale and tscore:
+            raise ValueError(f"estimator {text!r}: scale or tscore, not both")
+        return cls(horizon, support, centre, shrink, scale, tscore)
 
     def book(self, gamma: float) -> HorizonBook | None:
         """The per-group bookkeeping this estimator needs (``None``: the stored return)."""
@@ -145,20 +156,21 @@ class Estimator:
         for sid, r in zip(skills, values, strict=True):
             by_skill.setdefault(sid, []).append(r)
         out: dict[str, float] = {}
-        if self.support <= 1 and not self.shrink and not self.scale:
+        if self.support <= 1 and not self.shrink and not self.scale and not self.tscore:
             for name, sid in wanted.items():
                 mine = by_skill.get(sid)
                 out[name] = 0.0 if not mine else math.fsum(mine) / len(mine) - baseline
             return out
         unit = 1.0
-        if self.scale:
+        if self.scale or self.tscore:
             sd = math.sqrt(math.fsum((v - baseline) ** 2 for v in values) / len(values))
             unit = max(sd, SCALE_FLOOR)
-        supported = {
-            sid: (math.fsum(v) / len(v) - baseline) * len(v) / (len(v) + self.shrink) / unit
-            for sid, v in by_skill.items()
-            if len(v) >= self.support
-        }
+
+        def adv(v: list[float]) -> float:
+            a = (math.fsum(v) / len(v) - baseline) * len(v) / (len(v) + self.shrink) / unit
+            return a * math.sqrt(len(v)) if self.tscore else a
+
+        supported = {sid: adv(v) for sid, v in by_skill.items() if len(v) >= self.support}
         floor = min(supported.values(), default=0.0) if self.support > 1 else 0.0
         for name, sid in wanted.items():
             out[name] = supported.get(sid, floor)

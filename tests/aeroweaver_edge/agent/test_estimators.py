@@ -135,6 +135,11 @@ def test_shrink_and_scale_arithmetic() -> None:
     # a neighbourhood without spread says nothing, however small the float noise
     flat = Estimator(scale=True).advantages([1.0, 1.0 + 1e-12], [0, 1], {"a": 0, "b": 1})
     assert max(abs(x) for x in flat.values()) < 1e-8
+    t = Estimator(tscore=True).advantages(values, skills, wanted)
+    assert t["a"] == pytest.approx((1.5 - base) / sd * math.sqrt(2))  # two records
+    assert t["b"] == pytest.approx(scaled["b"])  # one record: as scale
+    with pytest.raises(ValueError, match="scale or tscore"):
+        Estimator.parse("scale,tscore")
     e = Estimator.parse("scale,shrink:4,centre,horizon:3")
     assert e.name == "horizon:3,centre,shrink:4,scale"
     assert Estimator.parse(e.name) == e
