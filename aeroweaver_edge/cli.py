@@ -614,7 +614,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--estimator", type=_estimator, default=None,
         help="advantage estimator: paper (default), horizon:H, centre, support:M, shrink:K, "
-        "scale, comma-joined (horizon:3,centre); overrides AEROWEAVER_ESTIMATOR; "
+        "scale or tscore, comma-joined (horizon:3,centre); overrides AEROWEAVER_ESTIMATOR; "
         "docs/adaptation.md",
     )  # fmt: skip
     s.add_argument(

@@ -242,7 +242,7 @@ class AgentConfig(_Section):
     # in-flight ones of the current episode (agent.memory, docs/adaptation.md).
     finalised_only: bool = False
     # How experience becomes an advantage (agent.estimators, docs/adaptation.md): "paper"
-    # (the paper's rule), or horizon:H, centre, support:M, shrink:K, scale, comma-joined.
+    # (the paper's rule), or horizon:H, centre, support:M, shrink:K, scale|tscore, comma-joined.
     # AEROWEAVER_ESTIMATOR, when set, overrides it (docs/configuration.md).
     estimator: str = "paper"
     # The scripted selector's base (agent.scripted): "reference" (the task's heuristic) or a

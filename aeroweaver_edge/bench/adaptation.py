@@ -602,7 +602,7 @@ def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
     )  # fmt: skip
     paired.add_argument(
         "--estimator", type=_estimator, default=None,
-        help="paper, horizon:H, centre, support:M, shrink:K, scale, comma-joined "
+        help="paper, horizon:H, centre, support:M, shrink:K, scale or tscore, comma-joined "
         "(horizon:3,centre); default: AEROWEAVER_ESTIMATOR, else paper",
     )  # fmt: skip
     paired.add_argument("--sequences", type=_positive, default=None, help="seed sequences")

@@ -94,7 +94,7 @@ COMMENTS: dict[str, tuple[str, str]] = {
     "agent.finalised_only": ("retrieve only returns of finished trajectories", ""),
     "agent.estimator": (
         "how experience becomes an advantage: paper (the paper's rule), or horizon:H, "
-        "centre, support:M, shrink:K, scale, comma-joined (docs/adaptation.md); "
+        "centre, support:M, shrink:K, scale or tscore, comma-joined (docs/adaptation.md); "
         "AEROWEAVER_ESTIMATOR overrides it",
         "",
     ),
