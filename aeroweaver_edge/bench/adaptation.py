@@ -57,6 +57,7 @@ from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.bench.paired_stats import paired_summary
 from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
@@ -620,8 +621,11 @@ def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
         if not (math.isfinite(args.beta) and args.beta > 0):
             p.error(f"--beta {args.beta!r}: the corrected run needs a positive finite beta")
         # flag > environment > default, as for aeroweaver sim (agent.choices)
-        args.base = args.base or choices.resolve("scripted_base")
-        args.estimator = choices.resolve("estimator", args.estimator)
+        try:
+            args.base = args.base or choices.resolve("scripted_base")
+            args.estimator = choices.resolve("estimator", args.estimator)
+        except UserError as exc:
+            p.error(str(exc))
         args.sequences = args.sequences or 3
         args.deadline = args.deadline or (10.0 if args.base != "llm" else args.llm_deadline + 15)
         args.command = f"{prog or 'python -m aeroweaver_edge.bench.adaptation'} " + " ".join(
