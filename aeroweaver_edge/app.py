@@ -56,9 +56,9 @@ async def open_selector(
             yield remote, SelectorInfo(remote.name, cfg.llm.model)
         return
     if cfg.agent.selector == "scripted":
-        from aeroweaver_edge.agent.scripted import scorer_from_env
+        from aeroweaver_edge.agent.scripted import scorer_for
 
-        scorer = scorer_from_env()  # the reference, or a degraded base (issue 24)
+        scorer = scorer_for(cfg.agent.scripted_base)  # the reference, or a degraded base
         yield scorer, SelectorInfo(scorer.name)
         return
     from aeroweaver_edge.agent.llm_selector import LLMSelector
@@ -154,16 +154,22 @@ async def run_daemon(
         ports, start, stop = _ports(cfg, mesh, headers)
         await start()
         stack.push_async_callback(stop)
+        chooser = str(getattr(selector, "name", type(selector).__name__))
         if selector is None:
-            selector, _info = await stack.enter_async_context(
+            selector, info = await stack.enter_async_context(
                 open_selector(cfg, cfg.uav, mesh=mesh, headers=headers)
             )
+            chooser = info.name
         memory = None
         if cfg.agent.beta > 0 or cfg.agent.memory_path is not None:
             from aeroweaver_edge.agent.memory import AsyncExperienceMemory
 
             memory = await AsyncExperienceMemory.from_config(cfg.agent)
             stack.push_async_callback(memory.aclose)
+        log.info(
+            "%s decides with %s; experience correction beta %g, estimator %s",
+            cfg.uav, chooser, cfg.agent.beta, cfg.agent.estimator,
+        )  # fmt: skip
         assert selector is not None
         daemon = UavDaemon(
             cfg,

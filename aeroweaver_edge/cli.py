@@ -67,6 +67,16 @@ def _estimator(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _scripted_base(text: str) -> str:
+    """``--base``: the canonical name, or one line naming the problem (exit 2)."""
+    from aeroweaver_edge.agent.scripted import Base
+
+    try:
+        return Base.parse(text).name
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _llm_from_args(args: argparse.Namespace) -> LLMConfig:
     url = args.llm or os.environ.get("AEROWEAVER_LLM_URL")
     model = args.model or os.environ.get("AEROWEAVER_LLM_MODEL")
@@ -99,10 +109,16 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.memory_dir:
         check_memory_dir(Path(args.memory_dir))
     check_skills()
-    if args.selector == "scripted":  # a bad AEROWEAVER_SCRIPTED_BASE: one line, before any start
-        from aeroweaver_edge.agent.scripted import scorer_from_env
+    # flag > environment > default; a bad variable is one line, before any start
+    from aeroweaver_edge.agent import choices
 
-        scorer_from_env()
+    if args.base is not None and args.selector != "scripted":
+        raise UserError(
+            f"--base {args.base}: a scripted base needs --selector scripted",
+            "add --selector scripted, or drop --base",
+        )
+    estimator = choices.resolve("estimator", args.estimator)
+    scripted_base = choices.resolve("scripted_base", args.base)
     if args.pace is not None and args.pace > 60:
         raise UserError(f"--pace {args.pace:g}: at most 60 seconds per round")
     llm = _llm_from_args(args) if args.selector == "llm" else LLMConfig()
@@ -136,11 +152,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
         pace_s=args.pace if args.pace is not None else (defaults.ROUND_S if args.console else 0.0),
         approval=args.approval,
         require_llm_answer=True,  # a run whose every decision would be a hold is refused
+        estimator=estimator,
+        scripted_base=scripted_base,
     )
-    # the daemons read it at start (in-process and --processes alike): no config field yet
-    from aeroweaver_edge.agent.estimators import ENV_ESTIMATOR
-
-    os.environ[ENV_ESTIMATOR] = args.estimator
     view = None if args.quiet else LiveView()
     if args.console:
         from aeroweaver_edge.cli_operator import require_extra
@@ -225,12 +239,15 @@ class StopBound:
 
 
 def _daemon(args: argparse.Namespace) -> int:
+    from aeroweaver_edge.agent.choices import with_env_overrides
     from aeroweaver_edge.app import run_daemon
     from aeroweaver_edge.mesh import build_zenoh_config
     from aeroweaver_edge.run_dir import ENV_PARENT
     from aeroweaver_edge.systemd_notify import Supervision
 
     cfg = load_config(args.config, UavConfig)
+    # AEROWEAVER_ESTIMATOR / AEROWEAVER_SCRIPTED_BASE override the file (agent.choices)
+    cfg = cfg.model_copy(update={"agent": with_env_overrides(cfg.agent)})
     build_zenoh_config(cfg.mesh)  # a bad endpoint or namespace: a config error, now
     if cfg.agent.memory_required:
         check_memory_path(cfg.agent.memory_path)
@@ -595,9 +612,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="experience correction weight, >= 0 (0: plain)",
     )
     s.add_argument(
-        "--estimator", type=_estimator, default="paper",
-        help="advantage estimator: paper (default), horizon:H, support:M, or comma-joined "
-        "(horizon:3,support:4); docs/adaptation.md",
+        "--estimator", type=_estimator, default=None,
+        help="advantage estimator: paper (default), horizon:H, centre, support:M, shrink:K, "
+        "scale or tscore, comma-joined (horizon:3,centre); overrides AEROWEAVER_ESTIMATOR; "
+        "docs/adaptation.md",
+    )  # fmt: skip
+    s.add_argument(
+        "--base", type=_scripted_base, default=None,
+        help="scripted selector's base: reference (default), hold-biased, position-biased, "
+        "noisy[:SD], optionally @T; overrides AEROWEAVER_SCRIPTED_BASE",
     )  # fmt: skip
     s.add_argument(
         "--top-k", type=int_in(1), default=defaults.TOP_K, help="task skills activated per UAV"

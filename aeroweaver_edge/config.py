@@ -241,6 +241,28 @@ class AgentConfig(_Section):
     # Experience retrieval uses only finalised returns (trajectories that ended), not the
     # in-flight ones of the current episode (agent.memory, docs/adaptation.md).
     finalised_only: bool = False
+    # How experience becomes an advantage (agent.estimators, docs/adaptation.md): "paper"
+    # (the paper's rule), or horizon:H, centre, support:M, shrink:K, scale|tscore, comma-joined.
+    # AEROWEAVER_ESTIMATOR, when set, overrides it (docs/configuration.md).
+    estimator: str = "paper"
+    # The scripted selector's base (agent.scripted): "reference" (the task's heuristic) or a
+    # degraded testbed: hold-biased, position-biased, noisy[:SD], each optionally @T.
+    # AEROWEAVER_SCRIPTED_BASE, when set, overrides it.
+    scripted_base: str = "reference"
+
+    @field_validator("estimator")
+    @classmethod
+    def _estimator(cls, value: str) -> str:
+        from aeroweaver_edge.agent.estimators import Estimator
+
+        return Estimator.parse(value).name  # ValueError: one line with the allowed forms
+
+    @field_validator("scripted_base")
+    @classmethod
+    def _scripted_base(cls, value: str) -> str:
+        from aeroweaver_edge.agent.scripted import Base
+
+        return Base.parse(value).name
 
     @field_validator("run_id")
     @classmethod

@@ -17,6 +17,16 @@ eligible record of the role at the same round (this memory's whole group, all bo
 episodes), so "late in the episode, when the team was already close" no longer looks like
 a good skill.
 
+``shrink:K`` pulls a skill's advantage towards 0 by its evidence, ``A * n / (n + K)`` (n
+its eligible records in the neighbourhood): a skill seen twice no longer outvotes one seen
+twenty times. ``scale`` expresses advantages in units of the neighbourhood's spread (its
+values' standard deviation, at least ``SCALE_FLOOR``), so the push ``beta * A`` does not
+depend on a task's reward scale: raw H-step returns differ by hundredths in one task and
+by tens in another, against base gaps of a few nats in both. ``tscore`` (instead of
+``scale``) counts in standard errors of the skill's mean, ``A * sqrt(n) / sd``: the push
+grows with the evidence behind it, so a difference seen in twenty records outweighs the
+same difference seen in one.
+
 ``support:M`` (a remedy of this project, combinable: ``horizon:3,support:4``) is against
 thin evidence: a skill with fewer than M eligible records in the neighbourhood gets no
 promotion -- its A is the lowest advantage of the supported skills (0 if none is
@@ -27,9 +37,8 @@ The bookkeeping a horizon needs lives in ``HorizonBook`` (one per retrieval grou
 ``agent.memory``): each trajectory's known rewards and, per record, how many rewards
 followed it and its H-step return, updated as rewards arrive, so retrieval stays one pass.
 
-A daemon picks its estimator from ``AEROWEAVER_ESTIMATOR`` (``estimator_from_env``; the
-config has no field for it yet); ``aeroweaver sim --estimator`` and the adaptation bench set
-it for their daemons.
+A daemon runs the estimator its config names (``[agent] estimator``); ``AEROWEAVER_ESTIMATOR``
+overrides the file and ``--estimator`` both (``agent.choices``, docs/configuration.md).
 """
 
 from __future__ import annotations
@@ -48,9 +57,10 @@ Traj = tuple[str, str, int]  # (run, uav, episode)
 RunKey = tuple[str, str, int, int]  # (run, uav, episode, round)
 
 _USAGE = (
-    "expected paper, horizon:H, support:M or centre (with a horizon), or a comma-joined mix "
-    "(horizon:3,support:4)"
+    "expected paper, horizon:H, support:M, shrink:K, scale, tscore or centre (with a "
+    "horizon), or a comma-joined mix (horizon:3,centre,scale)"
 )
+SCALE_FLOOR: Final = 1e-3  # ``scale``: a neighbourhood whose values spread less is "no evidence"
 
 
 @dataclass(frozen=True)
@@ -60,6 +70,9 @@ class Estimator:
     horizon: int | None = None  # None: the paper's return G_t
     support: int = 1  # fewest eligible records for a skill's own advantage
     centre: bool = False  # subtract the per-round mean H-step return of the group
+    shrink: int = 0  # a skill's advantage times n / (n + shrink): thin evidence says less
+    scale: bool = False  # advantages in units of the neighbourhood's spread of values
+    tscore: bool = False  # ... in units of the standard error of the skill's mean
 
     @property
     def name(self) -> str:
@@ -68,11 +81,17 @@ class Estimator:
             parts.append("centre")
         if self.support > 1:
             parts.append(f"support:{self.support}")
+        if self.shrink:
+            parts.append(f"shrink:{self.shrink}")
+        if self.scale:
+            parts.append("scale")
+        if self.tscore:
+            parts.append("tscore")
         return ",".join(parts) or "paper"
 
     @property
     def is_paper(self) -> bool:
-        return self.horizon is None and self.support == 1 and not self.centre
+        return self == PAPER
 
     @classmethod
     def parse(cls, text: str) -> Estimator:
@@ -80,7 +99,8 @@ class Estimator:
         with one line naming the problem otherwise."""
         horizon: int | None = None
         support = 1
-        centre = False
+        shrink = 0
+        centre = scale = tscore = False
         parts = [p.strip() for p in text.split(",")]
         if not text.strip() or any(not p for p in parts):
             raise ValueError(f"estimator {text!r}: {_USAGE}")
@@ -91,7 +111,13 @@ class Estimator:
             if kind == "centre" and not arg:
                 centre = True
                 continue
-            if kind not in ("horizon", "support"):
+            if kind == "scale" and not arg:
+                scale = True
+                continue
+            if kind == "tscore" and not arg:
+                tscore = True
+                continue
+            if kind not in ("horizon", "support", "shrink"):
                 raise ValueError(f"estimator {text!r}: unknown part {part!r}; {_USAGE}")
             try:
                 n = int(arg)
@@ -101,11 +127,15 @@ class Estimator:
                 raise ValueError(f"estimator {text!r}: {kind} needs a whole number 1..1000")
             if kind == "horizon":
                 horizon = n
-            else:
+            elif kind == "support":
                 support = n
+            else:
+                shrink = n
         if centre and horizon is None:
             raise ValueError(f"estimator {text!r}: centre needs a horizon (horizon:3,centre)")
-        return cls(horizon, support, centre)
+        if scale and tscore:
+            raise ValueError(f"estimator {text!r}: scale or tscore, not both")
+        return cls(horizon, support, centre, shrink, scale, tscore)
 
     def book(self, gamma: float) -> HorizonBook | None:
         """The per-group bookkeeping this estimator needs (``None``: the stored return)."""
@@ -126,17 +156,22 @@ class Estimator:
         for sid, r in zip(skills, values, strict=True):
             by_skill.setdefault(sid, []).append(r)
         out: dict[str, float] = {}
-        if self.support <= 1:
+        if self.support <= 1 and not self.shrink and not self.scale and not self.tscore:
             for name, sid in wanted.items():
                 mine = by_skill.get(sid)
                 out[name] = 0.0 if not mine else math.fsum(mine) / len(mine) - baseline
             return out
-        supported = {
-            sid: math.fsum(v) / len(v) - baseline
-            for sid, v in by_skill.items()
-            if len(v) >= self.support
-        }
-        floor = min(supported.values(), default=0.0)
+        unit = 1.0
+        if self.scale or self.tscore:
+            sd = math.sqrt(math.fsum((v - baseline) ** 2 for v in values) / len(values))
+            unit = max(sd, SCALE_FLOOR)
+
+        def adv(v: list[float]) -> float:
+            a = (math.fsum(v) / len(v) - baseline) * len(v) / (len(v) + self.shrink) / unit
+            return a * math.sqrt(len(v)) if self.tscore else a
+
+        supported = {sid: adv(v) for sid, v in by_skill.items() if len(v) >= self.support}
+        floor = min(supported.values(), default=0.0) if self.support > 1 else 0.0
         for name, sid in wanted.items():
             out[name] = supported.get(sid, floor)
         return out
@@ -146,8 +181,9 @@ PAPER: Final = Estimator()
 
 
 def estimator_from_env() -> Estimator:
-    """The estimator ``AEROWEAVER_ESTIMATOR`` names (unset or empty: the paper's rule); a
-    bad value is the user's to fix (``UserError``: one line, exit 2, before any flight)."""
+    """The estimator ``AEROWEAVER_ESTIMATOR`` alone names (unset or empty: the paper's rule;
+    a daemon resolves it against its config with ``agent.choices``); a bad value is the
+    user's to fix (``UserError``: one line, exit 2, before any flight)."""
     try:
         return Estimator.parse(os.environ.get(ENV_ESTIMATOR, "") or "paper")
     except ValueError as exc:

@@ -91,7 +91,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Final, TypeVar
 
-from aeroweaver_edge.agent.estimators import PAPER, Estimator, estimator_from_env
+from aeroweaver_edge.agent.estimators import PAPER, Estimator
 from aeroweaver_edge.agent.memory_async import AsyncExperienceMemory
 from aeroweaver_edge.agent.memory_index import (
     SMALL_GROUP,
@@ -195,7 +195,7 @@ class ExperienceMemory:
             finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
-            estimator=estimator_from_env(),
+            estimator=Estimator.parse(cfg.estimator),
         )
 
     # ------------------------------------------------------------------ the store

@@ -11,7 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
-from aeroweaver_edge.agent.estimators import PAPER, Estimator, estimator_from_env
+from aeroweaver_edge.agent.estimators import PAPER, Estimator
 from aeroweaver_edge.agent.memory_records import Neighbour, StoredRecord
 from aeroweaver_edge.config import AgentConfig
 from aeroweaver_edge.wire import ExperienceRecord
@@ -79,7 +79,7 @@ class AsyncExperienceMemory:
             finalised_only=cfg.finalised_only,
             run=run or cfg.run_id,
             required=cfg.memory_required,
-            estimator=estimator_from_env(),
+            estimator=Estimator.parse(cfg.estimator),
         )
 
     @property

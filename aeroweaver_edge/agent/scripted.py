@@ -18,8 +18,8 @@ times smaller: room for the correction to act). The
 randomness is a function of (task, UAV, episode, round, own position) only, so in-process and
 ``--processes`` runs agree and paired runs (beta = 0 against beta > 0) see the same noise
 in the same state.
-A daemon picks its base from ``AEROWEAVER_SCRIPTED_BASE`` (``scorer_from_env``): the
-selector config has no field for it yet.
+A daemon runs the base its config names (``[agent] scripted_base``);
+``AEROWEAVER_SCRIPTED_BASE`` overrides the file and ``--base`` both (``agent.choices``).
 """
 
 from __future__ import annotations
@@ -186,8 +186,9 @@ def scorer_for(base: str | Base) -> ReferenceScorer:
 
 
 def scorer_from_env() -> ReferenceScorer:
-    """The scorer ``AEROWEAVER_SCRIPTED_BASE`` names (unset or empty: the reference); a bad
-    value is a ``UserError`` (one line, exit 2)."""
+    """The scorer ``AEROWEAVER_SCRIPTED_BASE`` alone names (unset or empty: the reference;
+    a daemon resolves it against its config with ``agent.choices``); a bad value is a
+    ``UserError`` (one line, exit 2)."""
     try:
         return scorer_for(os.environ.get(ENV_BASE, "") or "reference")
     except ValueError as exc:

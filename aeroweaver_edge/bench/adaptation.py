@@ -37,28 +37,27 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import csv
 import json
 import math
-import os
 import shutil
 import statistics
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 from aeroweaver_edge import defaults
-from aeroweaver_edge.agent.estimators import ENV_ESTIMATOR, Estimator
-from aeroweaver_edge.agent.scripted import ENV_BASE, Base
+from aeroweaver_edge.agent import choices
+from aeroweaver_edge.agent.estimators import Estimator
+from aeroweaver_edge.agent.scripted import Base
 from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.bench.paired_stats import paired_summary
 from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
@@ -120,10 +119,7 @@ async def run_one(
 ) -> dict[str, Any]:
     await asyncio.to_thread(run_dir.mkdir, parents=True, exist_ok=True)
     trace_path = run_dir / "trace.jsonl"
-    with (
-        tempfile.TemporaryDirectory(prefix="aw-adapt-") as tmp,
-        _environment({ENV_BASE: base, ENV_ESTIMATOR: estimator}),
-    ):
+    with tempfile.TemporaryDirectory(prefix="aw-adapt-") as tmp:
         mem = Path(tmp)
         opts = SwarmOptions(
             task=task,
@@ -138,6 +134,8 @@ async def run_one(
             trace_path=trace_path,
             deadline_s=deadline_s,
             max_rounds=max_rounds or defaults.MAX_ROUNDS,
+            estimator=estimator,
+            scripted_base=base,
         )
         summary = (await run_swarm(opts)).as_dict()
         if keep_memory:
@@ -179,22 +177,6 @@ async def run_one(
     }
     write_json_file(run_dir / "result.json", result)
     return result
-
-
-@contextlib.contextmanager
-def _environment(values: dict[str, str]) -> Iterator[None]:
-    """The daemons of a run read their scripted base and estimator from the environment
-    (the agent config has no field for them yet); restored afterwards."""
-    old = {k: os.environ.get(k) for k in values}
-    os.environ.update(values)
-    try:
-        yield
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 def _load(path: Path) -> dict[str, Any] | None:
@@ -616,11 +598,13 @@ def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
     paired.add_argument("--json", metavar="OUT", help="paired mode: write the summary here")
     paired.add_argument(
         "--base", type=_base, default=None,
-        help="reference, hold-biased, position-biased, noisy[:SD] (scripted) or llm",
+        help="reference, hold-biased, position-biased, noisy[:SD] (scripted) or llm; "
+        "default: AEROWEAVER_SCRIPTED_BASE, else reference",
     )  # fmt: skip
     paired.add_argument(
         "--estimator", type=_estimator, default=None,
-        help="paper (default), horizon:H, support:M, or comma-joined (horizon:3,support:4)",
+        help="paper, horizon:H, centre, support:M, shrink:K, scale or tscore, comma-joined "
+        "(horizon:3,centre); default: AEROWEAVER_ESTIMATOR, else paper",
     )  # fmt: skip
     paired.add_argument("--sequences", type=_positive, default=None, help="seed sequences")
     paired.add_argument("--beta", type=float, default=0.8, help="the corrected run's beta")
@@ -636,8 +620,12 @@ def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
             p.error("paired mode runs beta = 0 and --beta: no --variants, --betas or --seeds")
         if not (math.isfinite(args.beta) and args.beta > 0):
             p.error(f"--beta {args.beta!r}: the corrected run needs a positive finite beta")
-        args.base = args.base or "reference"
-        args.estimator = args.estimator or "paper"
+        # flag > environment > default, as for aeroweaver sim (agent.choices)
+        try:
+            args.base = args.base or choices.resolve("scripted_base")
+            args.estimator = choices.resolve("estimator", args.estimator)
+        except UserError as exc:
+            p.error(str(exc))
         args.sequences = args.sequences or 3
         args.deadline = args.deadline or (10.0 if args.base != "llm" else args.llm_deadline + 15)
         args.command = f"{prog or 'python -m aeroweaver_edge.bench.adaptation'} " + " ".join(

@@ -15,6 +15,7 @@ from collections.abc import Awaitable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from aeroweaver_edge.agent import choices
 from aeroweaver_edge.config import UavConfig
 from aeroweaver_edge.run_dir import ENV_DIR, ENV_PARENT, LOCK_NAME
 
@@ -87,6 +88,8 @@ class DaemonSet:
         """``aeroweaver daemon`` for ``uav``: it dies with this process (Linux), and it holds
         the run directory's lock while it runs (``run_dir``), so it is never left behind."""
         env = {**os.environ, ENV_PARENT: str(os.getpid())}
+        for name in choices.ENV.values():  # the run resolved them into the config it wrote
+            env.pop(name, None)
         if (self.workdir / LOCK_NAME).exists():
             env[ENV_DIR] = str(self.workdir)
         log = (self.workdir / f"{uav}.log").open(log_mode)  # the child inherits it

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 from aeroweaver_edge import defaults as d
+from aeroweaver_edge.agent import choices
 from aeroweaver_edge.agent.memory import new_run_id
 from aeroweaver_edge.config import (
     AgentConfig,
@@ -109,6 +110,10 @@ class SwarmOptions:
     option_order: Literal["activation", "seeded"] = "activation"
     central_gather_s: float = 3.0  # the central node waits this long for a round's asks
     finalised_only: bool = False  # AgentConfig.finalised_only (retrieval of ended episodes)
+    # AgentConfig.estimator / .scripted_base; None: AEROWEAVER_ESTIMATOR /
+    # AEROWEAVER_SCRIPTED_BASE if set, else the default (agent.choices)
+    estimator: str | None = None
+    scripted_base: str | None = None
     pace_s: float = 0.0  # wall-clock floor per round (the console: watchable scripted runs)
     approval: Literal["normal", "strict"] = "normal"  # daemons' [approval] level
     # Refuse to start when the LLM endpoint does not answer the start-up probe (the CLI's
@@ -360,6 +365,9 @@ async def run_swarm(
     on_plan: Callable[[MissionPlan], None] | None = None,
 ) -> RunSummary:
     started = time.monotonic()
+    # flag > environment > default, resolved once (a bad variable: one line, before any start)
+    estimator = choices.resolve("estimator", opts.estimator)
+    scripted_base = choices.resolve("scripted_base", opts.scripted_base)
     async with contextlib.AsyncExitStack() as stack:
         # One embedded-server cache slot per UAV we expect to fly (the plan is not made yet:
         # it may need the LLM); a larger mission shares slots round-robin.
@@ -415,7 +423,7 @@ async def run_swarm(
             if opts.baseline != "none":
                 summary.selector = f"central:{opts.baseline}:{llm.model}"
         else:
-            summary.selector = "scripted:reference"
+            summary.selector = f"scripted:{scripted_base}"
         if on_plan is not None:  # who flies what, before it flies (and after every refusal)
             on_plan(plan)
         sim_cfg = SimConfig(
@@ -529,6 +537,8 @@ async def run_swarm(
                     state_context=opts.state_context,
                     coordination_reports=opts.coordination,
                     finalised_only=opts.finalised_only,
+                    estimator=estimator,
+                    scripted_base=scripted_base,
                 ),
                 safety=opts.safety,
                 approval=ApprovalConfig(level=opts.approval),

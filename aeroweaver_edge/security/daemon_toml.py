@@ -92,6 +92,18 @@ COMMENTS: dict[str, tuple[str, str]] = {
     "agent.state_context": ("retrieval state holds peer messages and mission context", ""),
     "agent.coordination_reports": ("send intent/target/status reports to peers", ""),
     "agent.finalised_only": ("retrieve only returns of finished trajectories", ""),
+    "agent.estimator": (
+        "how experience becomes an advantage: paper (the paper's rule), or horizon:H, "
+        "centre, support:M, shrink:K, scale or tscore, comma-joined (docs/adaptation.md); "
+        "AEROWEAVER_ESTIMATOR overrides it",
+        "",
+    ),
+    "agent.scripted_base": (
+        "the scripted selector's base: reference (the task's heuristic) or a degraded "
+        "testbed: hold-biased, position-biased, noisy[:SD], each optionally @T; "
+        "AEROWEAVER_SCRIPTED_BASE overrides it",
+        "",
+    ),
     # [safety]
     "safety.geofence_north_m": ("north bounds from home, metres (within +-10 km)", ""),
     "safety.geofence_east_m": ("east bounds from home, metres (within +-10 km)", ""),

@@ -40,7 +40,21 @@ def test_parse_names_and_round_trip() -> None:
 
 
 @pytest.mark.parametrize(
-    "bad", ["", "pap", "horizon", "horizon:0", "horizon:x", "support:-1", "horizon:3,", "h:3"]
+    "bad",
+    [
+        "",
+        "pap",
+        "horizon",
+        "horizon:0",
+        "horizon:x",
+        "support:-1",
+        "horizon:3,",
+        "h:3",
+        "scale:2",
+        "shrink",
+        "shrink:0",
+        "centre",
+    ],
 )
 def test_parse_refuses_with_one_line(bad: str) -> None:
     with pytest.raises(ValueError, match="estimator") as err:
@@ -54,27 +68,29 @@ def test_from_env(monkeypatch: pytest.MonkeyPatch) -> None:
     assert estimator_from_env() == PAPER
     monkeypatch.setenv(ENV_ESTIMATOR, "horizon:2")
     assert estimator_from_env() == Estimator(2)
-    m = ExperienceMemory.from_config(AgentConfig())
-    assert m.estimator == Estimator(2)
-    m.close()
     monkeypatch.setenv(ENV_ESTIMATOR, "horizon:zero")
     with pytest.raises(UserError, match="AEROWEAVER_ESTIMATOR: estimator 'horizon:zero'"):
         estimator_from_env()
 
 
-def test_async_from_config_reads_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_memory_from_config_reads_the_config_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The override is applied where a config enters the program (agent.choices), so the
+    memory a daemon opens follows its config, whatever the environment says."""
     import asyncio
 
     monkeypatch.setenv(ENV_ESTIMATOR, "support:3")
+    m = ExperienceMemory.from_config(AgentConfig(estimator="horizon:2"))
+    assert m.estimator == Estimator(2)
+    m.close()
 
     async def go() -> Estimator:
-        m = await AsyncExperienceMemory.from_config(AgentConfig())
+        m = await AsyncExperienceMemory.from_config(AgentConfig(estimator="horizon:3,scale"))
         try:
             return m.sync.estimator
         finally:
             await m.aclose()
 
-    assert asyncio.run(go()) == Estimator(None, 3)
+    assert asyncio.run(go()) == Estimator(3, scale=True)
 
 
 def test_paper_arithmetic_unchanged() -> None:
@@ -98,6 +114,36 @@ def test_support_floor_for_thin_and_unseen_skills() -> None:
     assert a["thin"] == a["new"] == a["y"]  # no promotion without evidence
     nothing = Estimator(None, 9).advantages(values, skills, {"x": 0})
     assert nothing == {"x": 0.0}
+
+
+def test_shrink_and_scale_arithmetic() -> None:
+    values = [1.0, 2.0, 3.0, 6.0]
+    skills = [0, 0, 1, 2]
+    wanted = {"a": 0, "b": 1, "c": 2, "new": -1}
+    base = math.fsum(values) / len(values)
+    sd = math.sqrt(math.fsum((v - base) ** 2 for v in values) / len(values))
+    shrunk = Estimator(shrink=2).advantages(values, skills, wanted)
+    assert shrunk["a"] == pytest.approx((1.5 - base) * 2 / 4)
+    assert shrunk["b"] == pytest.approx((3.0 - base) * 1 / 3)
+    assert shrunk["new"] == 0.0  # unseen: the neighbourhood's mean, as in the paper
+    scaled = Estimator(scale=True).advantages(values, skills, wanted)
+    assert scaled["c"] == pytest.approx((6.0 - base) / sd)
+    assert scaled["new"] == 0.0
+    # the push no longer depends on the reward scale
+    tiny = Estimator(scale=True).advantages([v / 1000 for v in values], skills, wanted)
+    assert tiny == pytest.approx(scaled)
+    # a neighbourhood without spread says nothing, however small the float noise
+    flat = Estimator(scale=True).advantages([1.0, 1.0 + 1e-12], [0, 1], {"a": 0, "b": 1})
+    assert max(abs(x) for x in flat.values()) < 1e-8
+    t = Estimator(tscore=True).advantages(values, skills, wanted)
+    assert t["a"] == pytest.approx((1.5 - base) / sd * math.sqrt(2))  # two records
+    assert t["b"] == pytest.approx(scaled["b"])  # one record: as scale
+    with pytest.raises(ValueError, match="scale or tscore"):
+        Estimator.parse("scale,tscore")
+    e = Estimator.parse("scale,shrink:4,centre,horizon:3")
+    assert e.name == "horizon:3,centre,shrink:4,scale"
+    assert Estimator.parse(e.name) == e
+    assert not e.is_paper
 
 
 def g_h(rewards: dict[int, float], t: int, h: int) -> float:

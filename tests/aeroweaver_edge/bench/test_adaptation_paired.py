@@ -103,3 +103,23 @@ def test_legacy_flags_refuse_paired_only_options(capsys: pytest.CaptureFixture[s
         cli(["bench", "adaptation", "--estimator", "horizon:3"])
     assert exit_.value.code == 2
     assert "belong to paired mode" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("env", "value"), [("AEROWEAVER_ESTIMATOR", "bogus"), ("AEROWEAVER_SCRIPTED_BASE", "lazy")]
+)
+def test_a_bad_override_in_the_environment_is_one_line_exit_2(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+    env: str, value: str,
+) -> None:  # fmt: skip
+    """The bench resolves flag > environment > default like ``aeroweaver sim``."""
+    monkeypatch.setenv(env, value)
+    out = tmp_path / "x.json"
+    with pytest.raises(SystemExit) as exit_:
+        cli(["bench", "adaptation", "--tasks", "coverage", "--json", str(out)])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert f"{env}:" in err
+    assert repr(value) in err
+    assert not out.exists()
