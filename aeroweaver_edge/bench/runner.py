@@ -325,12 +325,23 @@ outage, not the method: it is kept for reading but not counted, and a resume rer
 
 
 def llm_failure_problem(episodes: Sequence[dict[str, Any]]) -> str | None:
+    """Why a cell says more about its endpoint than its method, or None. HMAS-2's local
+    reviews count too: a failed review does not hold the UAV (the plan stands), so without
+    them a cell whose reviews all timed out would pass as HMAS-2 without feedback."""
     decisions = sum(int(e.get("decisions", 0)) for e in episodes)
-    failed = sum(int(e.get("holds_by_cause", {}).get("llm_failure", 0)) for e in episodes)
-    if decisions and failed / decisions > MAX_LLM_FAILURE_SHARE:
+    held = sum(int(e.get("holds_by_cause", {}).get("llm_failure", 0)) for e in episodes)
+    asked = sum(int(e.get("central_reviews", {}).get("asked", 0)) for e in episodes)
+    lost = sum(int(e.get("central_reviews", {}).get("failed", 0)) for e in episodes)
+    if decisions and held / decisions > MAX_LLM_FAILURE_SHARE:
         return (
-            f"{failed} of {decisions} decisions held because the LLM call failed "
+            f"{held} of {decisions} decisions held because the LLM call failed "
             f"(over {MAX_LLM_FAILURE_SHARE:.0%}): the endpoint was failing, not the method"
+        )
+    if asked and lost / asked > MAX_LLM_FAILURE_SHARE:
+        return (
+            f"{lost} of {asked} local reviews were lost because the LLM call failed "
+            f"(over {MAX_LLM_FAILURE_SHARE:.0%}): the plan went unreviewed, so this is not "
+            "HMAS-2; raise --llm-deadline or lower --jobs"
         )
     return None
 

@@ -62,3 +62,33 @@ async def test_a_failed_central_call_holds_every_uav_at_once_as_llm_failure(
     assert problem is not None
     assert "LLM call failed" in problem
     assert data["central"]["llm_calls"] >= ROUNDS  # the requests sent are counted
+
+
+def test_lost_reviews_make_the_cell_unusable_though_no_uav_held() -> None:
+    """Reviews that timed out leave the plan standing (no hold), which would pass as HMAS-2
+    run without feedback: over a quarter of them lost refuses the cell; a few do not."""
+
+    def rnd(i: int, errors: int) -> dict[str, Any]:
+        reviews = {
+            f"uav{u}": {"agree": None, "suggest": None, "error": "LLMTimeout: no answer"}
+            if u < errors
+            else {"agree": True, "suggest": "A", "error": None}
+            for u in range(3)
+        }
+        return {
+            "type": "round",
+            "episode": 0,
+            "round": i,
+            "decisions": {},
+            "central": {"calls": [{"stage": "plan"}], "reviews": reviews},
+        }
+
+    end = {"type": "episode_end", "episode": 0, "team_return": -1.0, "reason": "horizon"}
+    (ok,) = episode_metrics([rnd(0, 1), rnd(1, 0), rnd(2, 0), rnd(3, 0), end])
+    assert ok["central_reviews"] == {"asked": 12, "agreed": 11, "failed": 1}
+    assert llm_failure_problem([ok]) is None
+    (bad,) = episode_metrics([rnd(0, 3), rnd(1, 1), end])
+    assert bad["central_reviews"]["failed"] == 4
+    problem = llm_failure_problem([bad])
+    assert problem is not None
+    assert "4 of 6 local reviews" in problem

@@ -90,7 +90,7 @@ def test_hmas2_reviews_and_revisions_are_counted_and_tabled() -> None:
         {"type": "episode_end", "episode": 0, "team_return": -1.0, "reason": "horizon"},
     ]
     (ep,) = episode_metrics(lines)
-    assert ep["central_reviews"] == {"asked": 6, "agreed": 3}
+    assert ep["central_reviews"] == {"asked": 6, "agreed": 3, "failed": 0}
     assert ep["central_revised_rounds"] == 1  # round 1 only; round 3 had no reviews
     assert ep["central_revision_calls"] == 2  # rounds 1 and 2 had a disagreeing review
     assert ep["central_rounds"] == 4
