@@ -16,9 +16,8 @@ import pytest
 
 from aeroweaver_edge.cli import main
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh
 from aeroweaver_edge.security.identity import SwarmPki
-from aeroweaver_edge.wire import Keys
+from tests.helpers.swarm_procs import uavs_seen
 from tests.helpers.zenoh_net import free_port
 
 SWARM = "fs"
@@ -40,20 +39,7 @@ async def wait_for_uavs(keys_dir: Path, router: str, uavs: set[str], timeout_s: 
                      security=pki.security_for("observer"),
                      zenoh_overrides={"connect/timeout_ms": "30000"})  # fmt: skip
     # (the router may still be starting: the open waits for it)
-    mesh = await Mesh.open(cfg, node_id="observer")
-    seen: set[str] = set()
-    try:
-        watch = mesh.watch_liveliness(Keys(SWARM).alive_uav("*"))
-        async with asyncio.timeout(timeout_s):
-            async for key, alive in watch:
-                (seen.add if alive else seen.discard)(key.rsplit("/", 1)[-1])
-                if uavs <= seen:
-                    return True
-    except TimeoutError:
-        return False
-    finally:
-        await mesh.aclose()
-    return False
+    return await uavs_seen(cfg, SWARM, uavs, timeout_s)
 
 
 @pytest.mark.slow
