@@ -27,11 +27,14 @@ from __future__ import annotations
 
 import re
 from bisect import bisect_right
+from functools import lru_cache
 from typing import Final
 
 TOKENIZER_VERSION: Final = 1
 
-_TOKEN = re.compile(r"[a-z][a-z0-9]*(?:[_-][a-z0-9]+)*|\d+(?:\.\d+)?")
+# A word, or a number with its sign: a ``-`` is a sign when no letter or digit precedes it
+# (``[^\W_]`` is exactly ``str.isalnum``). Three groups, so ``findall`` yields plain tuples.
+_SCAN = re.compile(r"([a-z][a-z0-9]*(?:[_-][a-z0-9]+)*)|((?<![^\W_])-)?(\d+(?:\.\d+)?)")
 
 _EDGES: Final = (1, 2, 3, 5, 7, 10, 15, 20, 30, 50, 70, 100, 150, 200, 300, 500, 700, 1000)
 
@@ -49,23 +52,25 @@ def bucket(value: float) -> str:
     return "-" + label if value < 0 else label
 
 
+@lru_cache(maxsize=4096)  # bounded: state text can come from peers
+def _number_label(number: str, negative: bool) -> str:
+    value = float(number)
+    return bucket(-value if negative else value)
+
+
 def tokenise(text: str) -> frozenset[str]:
-    """The token set of a state description (rules in the module docstring)."""
-    low = text.lower()
+    """The token set of a state description (rules in the module docstring). Every
+    stored record and every retrieval tokenises, so this is the write path's hot loop."""
     out: set[str] = set()
+    add = out.add
     context = ""
-    for match in _TOKEN.finditer(low):
-        tok = match.group()
-        if tok[0].isalpha():
-            if tok not in STOPWORDS:
-                out.add(tok)
-                context = tok
-            continue
-        value = float(tok)
-        start = match.start()
-        if start >= 1 and low[start - 1] == "-" and (start < 2 or not low[start - 2].isalnum()):
-            value = -value
-        out.add(f"{context}~{bucket(value)}")
+    for word, minus, number in _SCAN.findall(text.lower()):
+        if word:
+            if word not in STOPWORDS:
+                add(word)
+                context = word
+        else:
+            add(f"{context}~{_number_label(number, bool(minus))}")
     return frozenset(out)
 
 
