@@ -652,10 +652,26 @@ class ExperienceMemory:
     def ingest_many(self, records: Iterable[ExperienceRecord]) -> int:
         """``ingest`` each record in one transaction (a peer's backlog, a late joiner's
         fetch): committed together when all are stored. Returns how many changed."""
-        changed = 0
+        changed, errors = 0, self.write_errors
         with self.batch(own=False):
             changed = sum(1 for record in records if self.ingest(record))
-        return changed
+        return changed if self.write_errors == errors else 0  # rolled back: nothing stored
+
+    def store_peers(self, batch: Iterable[tuple[ExperienceRecord, bool]]) -> int:
+        """Store one round's intake of peers' records in one transaction: ``ingest``
+        each, then ``credit_peer`` each newly stored in-flight record unless it was
+        ``fetched`` (a backlog's record carries returns its publisher already credited).
+        In the given order, so retrieval's recency tie-break sees the same memory however
+        the records were stored. Returns how many changed memory. One commit per round
+        instead of one per record: a late joiner's backlog stores at bulk speed."""
+        changed, errors = 0, self.write_errors
+        with self.batch(own=False):
+            for record, fetched in batch:
+                if self.ingest(record):
+                    changed += 1
+                    if not record.final and not fetched:
+                        self.credit_peer(record)
+        return changed if self.write_errors == errors else 0  # rolled back: nothing stored
 
     def _forget_evicted(self, evicted: list[tuple[str, str, RunKey]]) -> None:
         """Drop evicted records from the retrieval index; rebuild a group once half dead."""
@@ -715,19 +731,27 @@ class ExperienceMemory:
         Peers holding more of the group than this daemon are capped to
         ``max_sender_share`` of the places (none in a balanced, honest swarm: then this is
         exactly the uncapped selection)."""
-        k = self.neighbourhood
         heavy = self._heavy_origins(group)
-        if heavy:
-            k = len(group)  # the whole order, then the capped pick below
-        if len(group) <= SMALL_GROUP:
-            pos, sim = self._select_python(group, tokens, k)
-        elif heavy:
-            pos, sim = select_scan(group, tokens, k, self.finalised_only)
-        else:
-            pos, sim = self._select_numpy(group, tokens, k)
         if not heavy:
-            return pos, sim
-        return self._capped(group, pos, sim, heavy)
+            return self._ordered(group, tokens, self.neighbourhood)
+        # The capped pick walks the best-first order until K places are filled. Every
+        # selection returns a prefix of one total order (similarity, then recency), so
+        # a prefix that fills K gives what the whole order would: widen it only when the
+        # caps left places open (a late joiner, whose peers all hold more than it does,
+        # would otherwise score the whole group every round).
+        k = 4 * self.neighbourhood
+        while True:
+            pos, sim = self._ordered(group, tokens, k)
+            capped = self._capped(group, pos, sim, heavy)
+            if len(capped[0]) >= self.neighbourhood or len(pos) < k:
+                return capped
+            k *= 4
+
+    def _ordered(self, group: Group, tokens: frozenset[str], k: int) -> Selection:
+        """The first ``k`` of the group's best-first order."""
+        if len(group) <= SMALL_GROUP:
+            return self._select_python(group, tokens, k)
+        return self._select_numpy(group, tokens, k)
 
     def _heavy_origins(self, group: Group) -> set[int]:
         """Peers (origin ids) with more live records in ``group`` than this daemon's own."""

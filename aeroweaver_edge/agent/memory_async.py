@@ -137,6 +137,10 @@ class AsyncExperienceMemory:
         batch = list(records)  # materialise here: the iterable may not be thread-safe
         return await self._run(lambda: self._mem.ingest_many(batch))
 
+    async def store_peers(self, batch: Iterable[tuple[ExperienceRecord, bool]]) -> int:
+        items = list(batch)  # materialise here: the iterable may not be thread-safe
+        return await self._run(lambda: self._mem.store_peers(items))
+
     async def credit_peer(self, record: ExperienceRecord) -> int:
         return await self._run(lambda: self._mem.credit_peer(record))
 

@@ -127,12 +127,7 @@ class SharedIntake:
         self._pending.clear()
         self._per_sender.clear()
         self._fetched.clear()
-        changed = 0
-        for rec, fetched in batch:
-            if await memory.ingest(rec):
-                changed += 1
-                if not rec.final and not fetched:
-                    await memory.credit_peer(rec)
+        changed = await memory.store_peers(batch) if batch else 0
         self.stored += changed
         return changed
 

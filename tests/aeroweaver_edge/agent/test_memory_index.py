@@ -206,3 +206,61 @@ def test_memory_neighbourhood_is_brute_force_after_evictions(
         assert m.advantages("coverage", "searcher", state, ["a", "b", "s", "c"]) == fast
         monkeypatch.setattr(memory_module, "SMALL_GROUP", 0)
     m.close()
+
+
+@pytest.mark.parametrize("small_group", [0, 10**9])
+@pytest.mark.parametrize("own_records", [0, 30])
+def test_capped_neighbourhood_is_the_capped_walk_over_the_whole_order(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, small_group: int, own_records: int
+) -> None:
+    """Peers holding more than this daemon (all of them, for a late joiner) are capped to
+    half of K. The selection widens its prefix of the best-first order only while the caps
+    leave places open; it must equal the capped walk over the whole brute-force order,
+    including when one peer owns every best match and the walk runs deep."""
+    monkeypatch.setattr(memory_module, "SMALL_GROUP", small_group)
+    rng = random.Random(11)
+    k = 8
+    m = ExperienceMemory(tmp_path / "m.sqlite3", neighbourhood=k, max_records_per_sender=10**6)
+    for t in range(own_records):
+        m.append(task="coverage", role="searcher", uav="me", episode=0, round=t,
+                 state_text=_text(rng), skill="a", invocation="a()")  # fmt: skip
+        m.add_reward("me", 0, t, rng.uniform(-1, 1), "test")
+    m.finalise("me", 0)
+    # p1 floods near-copies of the queries; p2 and p3 hold a few ordinary records.
+    for i in range(600):
+        m.ingest(_peer("p1", i, "landmark l1 peer uav2 north dist 7 m", rng.uniform(-1, 1)))
+    for i in range(40):
+        m.ingest(_peer(rng.choice(["p2", "p3"]), 1000 + i, _text(rng), rng.uniform(-1, 1)))
+    rows = {(r.run, r.uav, r.episode, r.round): r for r in m.records("coverage", "searcher")}
+    per_origin: dict[str, int] = {}
+    for r in rows.values():
+        per_origin[r.origin] = per_origin.get(r.origin, 0) + 1
+    mine = per_origin.get("", 0)
+    heavy = {o for o, n in per_origin.items() if o != "" and n > mine}
+    assert "p1" in heavy
+    cap = max(1, int(0.5 * k))
+    for state in ["landmark l1 peer uav2 north dist 7 m"] + [_text(rng) for _ in range(20)]:
+        query = tokenise(state)
+        group = m._group("coverage", "searcher")
+        order = sorted(
+            (
+                (jaccard(tokenise(rows[key].state_text), query), i, key)
+                for key, i in group.pos.items()
+                if tokenise(rows[key].state_text) & query
+            ),
+            key=lambda x: (-x[0], -x[1]),
+        )
+        expected: list[tuple[str, ...]] = []
+        taken: dict[str, int] = {}
+        for _, _, key in order:
+            origin = rows[key].origin
+            if origin in heavy:
+                if taken.get(origin, 0) >= cap:
+                    continue
+                taken[origin] = taken.get(origin, 0) + 1
+            expected.append(key)
+            if len(expected) == k:
+                break
+        got = [(n.run, *n.key) for n in m.neighbourhood_of("coverage", "searcher", state)]
+        assert got == expected
+    m.close()

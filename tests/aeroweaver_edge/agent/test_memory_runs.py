@@ -486,7 +486,7 @@ def test_a_batch_commits_whole_and_matches_single_writes(tmp_path: Path) -> None
 def test_a_failed_batch_rolls_back_whole(tmp_path: Path) -> None:
     """Disk full inside a batch: nothing of the block stays, the index forgets it too, the
     error counts once; a required memory stops for its own writes, and a peers' batch
-    (``ingest_many``) is dropped without stopping it."""
+    (``ingest_many``, a round's intake ``store_peers``) is dropped without stopping it."""
     with ExperienceMemory(tmp_path / "m.sqlite3", required=True, run="r") as m:
         episode(m, "u1", 0, [1.0], "a")
         m.warm(T, R)
@@ -496,6 +496,8 @@ def test_a_failed_batch_rolls_back_whole(tmp_path: Path) -> None:
         peers = [_peer_record(i, f"landmark {i} " + "filler " * 500) for i in range(60)]
         assert m.ingest_many(peers) == 0
         assert m.write_errors == 1
+        assert m.store_peers([(p, False) for p in peers]) == 0
+        assert m.write_errors == 2
 
         def fill() -> None:
             with m.batch():
@@ -505,7 +507,7 @@ def test_a_failed_batch_rolls_back_whole(tmp_path: Path) -> None:
 
         with pytest.raises(MemoryUnavailable, match="batch failed"):
             fill()
-        assert m.write_errors == 2
+        assert m.write_errors == 3
         assert [r.round for r in m.records(T, R)] == [0]
         assert [n.key for n in m.neighbourhood_of(T, R, "landmark")] == [("u1", 0, 0)]
 
@@ -517,5 +519,8 @@ async def test_async_ingest_many_runs_in_the_memory_thread(tmp_path: Path) -> No
         assert await mem.ingest_many(records) == 5
         assert await mem.ingest_many([_peer_record(0, "landmark l0")]) == 0  # same version
         assert await mem.count() == 5
+        more = ((_peer_record(i, f"landmark l{i}"), False) for i in range(5, 8))
+        assert await mem.store_peers(more) == 3  # a generator, one round's intake
+        assert await mem.count() == 8
     finally:
         await mem.aclose()
