@@ -8,6 +8,12 @@ times ``advantages`` for fresh states. Prints one JSON line. ``fill_s`` and
 ``inserts_per_s`` count the time inside the memory's API only, not the generation of the
 synthetic states (before 2026-12-03 they did, and every write was its own transaction).
 
+``--writer backlog`` fills through the other write path instead: peers' finalised records
+as a late joiner fetches them (``ExperienceMemory.store_peers``, one transaction per wire
+batch of ``MAX_BATCH_RECORDS``), the path where bulk speed matters; a daemon's own writes
+come one decision per round. The per-sender caps are raised to hold every record, so no
+eviction runs.
+
 The states imitate a searcher's view of the coverage task (own pose, landmarks and peers
 within sensing range with offsets and distances, peer messages, round), so token sets,
 vocabulary size and posting-list lengths are realistic, not best case.
@@ -30,6 +36,7 @@ from typing import Any
 
 from aeroweaver_edge.agent.memory import ExperienceMemory
 from aeroweaver_edge.defaults import MAX_ROUNDS, SENSING_RADIUS_M
+from aeroweaver_edge.wire import MAX_BATCH_RECORDS, ExperienceRecord, Header
 
 TASK = "coverage"
 ROLE = "searcher"
@@ -37,6 +44,7 @@ UAVS = ("uav1", "uav2", "uav3")
 ROUNDS = MAX_ROUNDS
 LANDMARKS = {"L1": (-28.0, 24.0), "L2": (4.0, 34.0), "L3": (32.0, 20.0)}
 SENSING_M = SENSING_RADIUS_M
+WRITERS = ("own", "backlog")
 
 
 def _state(rng: random.Random, uav: str, rnd: int) -> tuple[str, list[str]]:
@@ -114,22 +122,76 @@ def fill(
     return spent
 
 
+def fill_backlog(memory: ExperienceMemory, records: int, rng: random.Random) -> float:
+    """Store ``records`` peers' finalised records (3 peers x 24 rounds per episode) the
+    way a late joiner stores a fetched backlog: one ``store_peers`` per wire batch. Returns
+    the seconds spent inside the memory's API (the records are built untimed)."""
+    memory.max_records_per_sender = records + 1
+    memory.max_bytes_per_sender = records * 8192
+    done = 0
+    episode = 0
+    spent = 0.0
+    while done < records:
+        episode += 1
+        batch: list[tuple[ExperienceRecord, bool]] = []
+        for i, uav in enumerate(UAVS):
+            ret = 0.0
+            rows: list[tuple[int, str, str, float]] = []
+            for rnd in range(ROUNDS):
+                if done + len(batch) + len(rows) >= records:
+                    break
+                text, options = _state(rng, uav, rnd)
+                inv = rng.choice(options)
+                rows.append((rnd, text, inv, _reward(rng, inv)))
+            for rnd, text, inv, reward in reversed(rows):  # G_t = r_t + gamma G_t+1
+                ret = reward + 0.95 * ret
+                h = Header(sender=uav, epoch=1, seq=episode * 100 + rnd, stamp=0.0)
+                record = ExperienceRecord(
+                    h=h, task=TASK, role=ROLE, uav=uav, episode=episode, round=rnd,
+                    state_text=text, skill=inv.split("(")[0], invocation=inv,
+                    reward=reward, ret=ret, final=True, run=f"peer-run-{i}",
+                )  # fmt: skip
+                batch.append((record, True))
+        t0 = time.perf_counter()
+        for start in range(0, len(batch), MAX_BATCH_RECORDS):
+            memory.store_peers(batch[start : start + MAX_BATCH_RECORDS])
+        spent += time.perf_counter() - t0
+        done += len(batch)
+    return spent
+
+
+def _transactions(writer: str, per_write: bool) -> str:
+    if writer == "backlog":
+        return f"per {MAX_BATCH_RECORDS} records"
+    return "per write" if per_write else "per episode"
+
+
 def _percentile(values: Sequence[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
 
 
 def run(
-    records: int, queries: int = 200, seed: int = 0, *, per_write: bool = False
+    records: int,
+    queries: int = 200,
+    seed: int = 0,
+    *,
+    per_write: bool = False,
+    writer: str = "own",
 ) -> dict[str, Any]:
     """Fill, reopen and query a temporary memory; figures in ms, s and bytes."""
     if records < 1 or queries < 1:
         raise ValueError("records and queries must be at least 1")
+    if writer not in WRITERS:
+        raise ValueError(f"writer must be one of {', '.join(WRITERS)}")
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="aw-bench-memory-") as tmp:
         path = Path(tmp) / "memory.sqlite"
         with ExperienceMemory(path) as memory:
-            fill_s = fill(memory, records, rng, per_write=per_write)
+            if writer == "backlog":
+                fill_s = fill_backlog(memory, records, rng)
+            else:
+                fill_s = fill(memory, records, rng, per_write=per_write)
         db_bytes = sum(p.stat().st_size for p in Path(tmp).iterdir())
 
         t0 = time.perf_counter()
@@ -153,7 +215,8 @@ def run(
         "max_ms": round(max(latencies), 3),
         "fill_s": round(fill_s, 3),
         "inserts_per_s": round(records / fill_s, 1),
-        "transactions": "per write" if per_write else "per episode",
+        "writer": writer,
+        "transactions": _transactions(writer, per_write),
         "open_s": round(opened_s, 3),
         "index_build_s": round(index_s, 3),
         "db_bytes": db_bytes,
@@ -172,11 +235,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="commit every write on its own (a daemon's decisions) instead of per episode",
     )
+    parser.add_argument(
+        "--writer",
+        choices=WRITERS,
+        default="own",
+        help="own: a daemon's decisions, rewards and finalise; backlog: peers' finalised "
+        "records stored as a late joiner stores a fetch",
+    )
     args = parser.parse_args(argv)
+    if args.per_write and args.writer != "own":
+        print("bench memory: --per-write applies to --writer own only", file=sys.stderr)
+        return 2
     if args.records < 1 or args.queries < 1:
         print("bench memory: --records and --queries must be at least 1", file=sys.stderr)
         return 2
-    print(json.dumps(run(args.records, args.queries, args.seed, per_write=args.per_write)))
+    figures = run(
+        args.records, args.queries, args.seed, per_write=args.per_write, writer=args.writer
+    )
+    print(json.dumps(figures))
     return 0
 
 

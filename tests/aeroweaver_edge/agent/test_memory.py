@@ -837,6 +837,35 @@ def test_bench_fill_stores_the_same_records_batched_or_not(tmp_path: Path) -> No
     assert rows[0] == rows[1]
 
 
+def test_bench_backlog_stores_peers_finalised_records(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--writer backlog`` stores peers' finalised records through ``store_peers``: every
+    record is kept, final, with its discounted return; it does not mix with --per-write."""
+    import random
+
+    with ExperienceMemory(tmp_path / "b.sqlite", run="me") as mem:
+        bench.fill_backlog(mem, 100, random.Random(4))
+        stored = mem.records(bench.TASK, bench.ROLE)
+    assert len(stored) == 100
+    assert all(r.final and r.origin in bench.UAVS for r in stored)
+    by_trajectory: dict[tuple[str, int], list[StoredRecord]] = {}
+    for r in stored:
+        by_trajectory.setdefault((r.uav, r.episode), []).append(r)
+    for records in by_trajectory.values():
+        records.sort(key=lambda r: r.round)
+        for i, r in enumerate(records):
+            assert r.reward is not None
+            assert r.ret is not None
+            expected = sum(0.95**j * (x.reward or 0.0) for j, x in enumerate(records[i:]))
+            assert r.ret == pytest.approx(expected)
+    assert bench.main(["--records", "150", "--queries", "3", "--writer", "backlog"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert (result["records"], result["writer"]) == (150, "backlog")
+    assert bench.main(["--records", "10", "--writer", "backlog", "--per-write"]) == 2
+    assert capsys.readouterr().err == "bench memory: --per-write applies to --writer own only\n"
+
+
 @pytest.mark.parametrize("finalised_only", [False, True])
 def test_python_and_numpy_retrieval_select_the_same_neighbourhood(
     tmp_path: Path, finalised_only: bool
