@@ -25,6 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
+from aeroweaver_edge.bench.run_time import markdown as run_time_markdown
+from aeroweaver_edge.bench.run_time import run_time
 from aeroweaver_edge.bench.setup_cost import SETUP_CONDITIONS
 from aeroweaver_edge.bench.stats import bootstrap_ci, holm, wilcoxon
 from aeroweaver_edge.hold_reasons import HOLD_CAUSES
@@ -647,8 +649,15 @@ def write_report(out: Path, *, tasks: Sequence[str], conditions: Sequence[str]) 
         w.writeheader()
         w.writerows(rows)
     stats = aggregate(cells)
-    (out / "table.md").write_text(markdown(stats, tasks, conditions), encoding="utf-8")
-    write_json_file(out / "summary.json", summary(stats, tasks, conditions))
+    chosen = [
+        c for c in cells if c["bench"]["task"] in tasks and c["bench"]["condition"] in conditions
+    ]
+    timing = run_time(chosen)
+    table = markdown(stats, tasks, conditions) + "\n".join(["", *run_time_markdown(timing)])
+    (out / "table.md").write_text(table.rstrip("\n") + "\n", encoding="utf-8")
+    write_json_file(
+        out / "summary.json", {**summary(stats, tasks, conditions), "run_time": timing.figures()}
+    )
     from aeroweaver_edge.bench.plots import write_plots
 
     write_plots(out, stats, tasks, conditions)
