@@ -804,7 +804,21 @@ class ExperienceMemory:
     def neighbourhood_of(self, task: str, role: str, state_text: str) -> list[Neighbour]:
         """The retrieved neighbourhood, best first (what ``advantages`` averages over)."""
         group = self._group(task, role)
-        pos, sim = self._select(group, tokenise(state_text))
+        return self._neighbours(group, *self._select(group, tokenise(state_text)))
+
+    def whole_group_neighbourhood(self, task: str, role: str, state_text: str) -> list[Neighbour]:
+        """The neighbourhood found by scoring every record of the group and walking the
+        whole best-first order under the sender caps: no index, no early stop. What
+        ``neighbourhood_of`` must equal; for tests and benchmarks."""
+        group = self._group(task, role)
+        pos, sim = select_scan(group, tokenise(state_text), len(group), self.finalised_only)
+        heavy = self._heavy_origins(group)
+        if heavy:
+            return self._neighbours(group, *self._capped(group, pos, sim, heavy))
+        return self._neighbours(group, pos[: self.neighbourhood], sim[: self.neighbourhood])
+
+    @staticmethod
+    def _neighbours(group: Group, pos: list[int], sim: list[float]) -> list[Neighbour]:
         return [
             Neighbour(
                 group.keys[i][1:],

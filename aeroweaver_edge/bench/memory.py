@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from aeroweaver_edge.agent.memory import ExperienceMemory
+from aeroweaver_edge.agent.memory_records import Neighbour
 from aeroweaver_edge.defaults import MAX_ROUNDS, SENSING_RADIUS_M
 from aeroweaver_edge.wire import MAX_BATCH_RECORDS, ExperienceRecord, Header
 
@@ -160,6 +161,10 @@ def fill_backlog(memory: ExperienceMemory, records: int, rng: random.Random) -> 
     return spent
 
 
+def _identity(n: Neighbour) -> tuple[object, ...]:
+    return (n.run, n.key, n.seq, n.similarity)  # the value may be NaN (in flight)
+
+
 def _transactions(writer: str, per_write: bool) -> str:
     if writer == "backlog":
         return f"per {MAX_BATCH_RECORDS} records"
@@ -178,6 +183,7 @@ def run(
     *,
     per_write: bool = False,
     writer: str = "own",
+    check_whole: bool = False,
 ) -> dict[str, Any]:
     """Fill, reopen and query a temporary memory; figures in ms, s and bytes."""
     if records < 1 or queries < 1:
@@ -201,12 +207,18 @@ def run(
             t0 = time.perf_counter()
             memory.advantages(TASK, ROLE, probe, probe_opts)  # builds the index
             index_s = time.perf_counter() - t0
-            latencies = []
+            latencies, whole, same = [], [], 0
             for q in range(queries):
                 text, options = _state(rng, UAVS[q % len(UAVS)], q % ROUNDS)
                 t0 = time.perf_counter()
                 memory.advantages(TASK, ROLE, text, options)
                 latencies.append((time.perf_counter() - t0) * 1e3)
+                if check_whole:
+                    t0 = time.perf_counter()
+                    reference = memory.whole_group_neighbourhood(TASK, ROLE, text)
+                    whole.append((time.perf_counter() - t0) * 1e3)
+                    got = memory.neighbourhood_of(TASK, ROLE, text)
+                    same += [_identity(n) for n in got] == [_identity(n) for n in reference]
     return {
         "records": records,
         "queries": queries,
@@ -217,6 +229,14 @@ def run(
         "inserts_per_s": round(records / fill_s, 1),
         "writer": writer,
         "transactions": _transactions(writer, per_write),
+        **(
+            {
+                "whole_group_p50_ms": round(statistics.median(whole), 3),
+                "same_neighbourhood": f"{same} of {queries}",
+            }
+            if check_whole
+            else {}
+        ),
         "open_s": round(opened_s, 3),
         "index_build_s": round(index_s, 3),
         "db_bytes": db_bytes,
@@ -242,6 +262,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="own: a daemon's decisions, rewards and finalise; backlog: peers' finalised "
         "records stored as a late joiner stores a fetch",
     )
+    parser.add_argument(
+        "--check-whole",
+        action="store_true",
+        help="also time the whole-group selection per query and count identical "
+        "neighbourhoods (what the indexed, early-stopping selection must equal)",
+    )
     args = parser.parse_args(argv)
     if args.per_write and args.writer != "own":
         print("bench memory: --per-write applies to --writer own only", file=sys.stderr)
@@ -250,7 +276,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("bench memory: --records and --queries must be at least 1", file=sys.stderr)
         return 2
     figures = run(
-        args.records, args.queries, args.seed, per_write=args.per_write, writer=args.writer
+        args.records,
+        args.queries,
+        args.seed,
+        per_write=args.per_write,
+        writer=args.writer,
+        check_whole=args.check_whole,
     )
     print(json.dumps(figures))
     return 0

@@ -841,7 +841,8 @@ def test_bench_backlog_stores_peers_finalised_records(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """``--writer backlog`` stores peers' finalised records through ``store_peers``: every
-    record is kept, final, with its discounted return; it does not mix with --per-write."""
+    record is kept, final, with its discounted return; it does not mix with --per-write.
+    ``--check-whole`` compares each neighbourhood with the whole-group selection."""
     import random
 
     with ExperienceMemory(tmp_path / "b.sqlite", run="me") as mem:
@@ -859,9 +860,11 @@ def test_bench_backlog_stores_peers_finalised_records(
             assert r.ret is not None
             expected = sum(0.95**j * (x.reward or 0.0) for j, x in enumerate(records[i:]))
             assert r.ret == pytest.approx(expected)
-    assert bench.main(["--records", "150", "--queries", "3", "--writer", "backlog"]) == 0
+    argv = ["--records", "150", "--queries", "3", "--writer", "backlog", "--check-whole"]
+    assert bench.main(argv) == 0
     result = json.loads(capsys.readouterr().out)
     assert (result["records"], result["writer"]) == (150, "backlog")
+    assert result["same_neighbourhood"] == "3 of 3"  # every peer is capped: a late joiner
     assert bench.main(["--records", "10", "--writer", "backlog", "--per-write"]) == 2
     assert capsys.readouterr().err == "bench memory: --per-write applies to --writer own only\n"
 
