@@ -13,8 +13,9 @@ compute exactly that, with the same float similarities ``c / (size + q - c)``:
     plain Python over the postings; for groups up to ``SMALL_GROUP`` (no numpy import).
 ``select_scan``
     numpy: one ``bincount`` over every posting of the query's tokens, then a threshold
-    pick of the top K over the whole group. Kept as the reference and for a K as large as
-    the group (the per-sender share cap needs the whole order).
+    pick of the top K over the whole group. Kept as the reference
+    (``ExperienceMemory.whole_group_neighbourhood``); the per-sender share cap walks a
+    widening prefix of the order from the other two instead.
 ``select_indexed``
     numpy, for large groups. Overlaps are counted in ``uint8``/``uint16``: a token held by
     at least 1/16 of the group adds a cached dense 0/1 column (one vectorised add, no
