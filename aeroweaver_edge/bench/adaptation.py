@@ -40,6 +40,7 @@ import asyncio
 import csv
 import json
 import math
+import os
 import shutil
 import statistics
 import sys
@@ -59,6 +60,7 @@ from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.errors import UserError
 from aeroweaver_edge.json_out import write_json_file
+from aeroweaver_edge.llm.embedded import THREADS_ENV
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
@@ -386,22 +388,26 @@ async def run_paired(args: argparse.Namespace, llm: LLMConfig) -> dict[str, Any]
     cells: dict[tuple[str, int, float], dict[str, Any]] = {}
     started = time.monotonic()
     ran = 0
-    for n, (task, seq, beta) in enumerate(todo, 1):
+    slots = asyncio.Semaphore(max(1, args.jobs))  # FIFO: cells start in plan order
+
+    async def cell(n: int, task: str, seq: int, beta: float) -> None:
+        nonlocal ran
         run_dir = _cell_dir(out, args.base, task, seq, beta, args.estimator)
         done = _load(run_dir / "result.json")
         if done is None or len(done["episodes"]) != args.episodes:
-            done = await run_one(
-                task, sequence_seed(seq), Variant(beta), args.episodes, args.uavs, selector,
-                llm, run_dir, args.keep_memory, args.deadline, base=base,
-                estimator=args.estimator, max_rounds=args.rounds,
-            )  # fmt: skip
+            async with slots:
+                done = await run_one(
+                    task, sequence_seed(seq), Variant(beta), args.episodes, args.uavs,
+                    selector, llm, run_dir, args.keep_memory, args.deadline, base=base,
+                    estimator=args.estimator, max_rounds=args.rounds,
+                )  # fmt: skip
             ran += 1
             left = sum(
                 1
-                for t, q, b in todo[n:]
+                for t, q, b in todo
                 if _load(_cell_dir(out, args.base, t, q, b, args.estimator) / "result.json") is None
             )
-            per = (time.monotonic() - started) / ran
+            per = (time.monotonic() - started) / ran / max(1, args.jobs)
             print(
                 f"[{n}/{len(todo)}] {task} seq {seq} beta={beta:g}: mean return "
                 f"{statistics.fmean(_returns(done)):.2f} ({done['wall_s']:.1f} s; "
@@ -410,6 +416,10 @@ async def run_paired(args: argparse.Namespace, llm: LLMConfig) -> dict[str, Any]
                 flush=True,
             )
         cells[(task, seq, beta)] = done
+
+    async with asyncio.TaskGroup() as group:  # a failing cell cancels the rest; rerun resumes
+        for n, (task, seq, beta) in enumerate(todo, 1):
+            group.create_task(cell(n, task, seq, beta), name=f"adaptation-cell-{n}")
     return summarise(args, cells)
 
 
@@ -609,6 +619,11 @@ def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
     paired.add_argument("--sequences", type=_positive, default=None, help="seed sequences")
     paired.add_argument("--beta", type=float, default=0.8, help="the corrected run's beta")
     paired.add_argument("--rounds", type=_positive, default=None, help="rounds per episode")
+    paired.add_argument(
+        "--jobs", type=_positive, default=1,
+        help="cells run at once (with the embedded model each cell's server then gets one "
+        "thread, as in bench run)",
+    )  # fmt: skip
     args = p.parse_args(argv)
     if "all" in args.tasks:
         args.tasks = list(TASK_NAMES)
@@ -627,6 +642,8 @@ def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
         except UserError as exc:
             p.error(str(exc))
         args.sequences = args.sequences or 3
+        if args.jobs > 1 and args.base == "llm" and not args.llm:
+            os.environ.setdefault(THREADS_ENV, "1")  # one server per cell, one core each
         args.deadline = args.deadline or (10.0 if args.base != "llm" else args.llm_deadline + 15)
         args.command = f"{prog or 'python -m aeroweaver_edge.bench.adaptation'} " + " ".join(
             argv if argv is not None else sys.argv[1:]
@@ -639,6 +656,8 @@ def main(argv: list[str] | None = None, *, prog: str | None = None) -> int:
         return main_paired(args, llm)
     if args.base is not None or args.estimator is not None or args.rounds is not None:
         p.error("--base, --estimator and --rounds belong to paired mode (--json OUT)")
+    if args.jobs != 1:
+        p.error("--jobs belongs to paired mode (--json OUT)")
     args.out = args.out or "docs/adaptation"
     args.seeds = args.seeds or [args.seed]
     if args.variants is None:

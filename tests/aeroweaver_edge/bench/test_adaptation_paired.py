@@ -72,6 +72,25 @@ def test_tiny_paired_run_summary_curves_and_resume(
     assert (runs / "coverage" / "seq0" / "b0" / "result.json").stat().st_mtime_ns == stamp
 
 
+def test_cells_run_side_by_side_give_the_same_summary(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--jobs 2`` runs two cells at once (each its own swarm and memory): the same cells,
+    so the same summary as one at a time."""
+    summaries = []
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}.json"
+        argv = [
+            "bench", "adaptation", "--base", "hold-biased", "--estimator", "scale",
+            "--tasks", *TASKS, "--sequences", "2", "--episodes", "2", "--rounds", "3",
+            "--jobs", jobs, "--json", str(out),
+        ]  # fmt: skip
+        assert cli(argv) == 0
+        assert capsys.readouterr().err.count("] ") == 8  # a progress line per cell
+        summaries.append(json.loads(out.read_text())["tasks"])
+    assert summaries[0] == summaries[1]
+
+
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
@@ -80,6 +99,7 @@ def test_tiny_paired_run_summary_curves_and_resume(
         (["--sequences", "0"], "expected a whole number >= 1"),
         (["--beta", "0"], "positive finite beta"),
         (["--seeds", "3"], "no --variants, --betas or --seeds"),
+        (["--jobs", "0"], "expected a whole number >= 1"),
     ],
 )
 def test_bad_arguments_are_one_line_exit_2(
@@ -98,11 +118,14 @@ def test_bad_arguments_are_one_line_exit_2(
     assert not (tmp_path / "x-runs").exists()
 
 
-def test_legacy_flags_refuse_paired_only_options(capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("flag", [["--estimator", "horizon:3"], ["--jobs", "2"]])
+def test_legacy_flags_refuse_paired_only_options(
+    capsys: pytest.CaptureFixture[str], flag: list[str]
+) -> None:
     with pytest.raises(SystemExit) as exit_:
-        cli(["bench", "adaptation", "--estimator", "horizon:3"])
+        cli(["bench", "adaptation", *flag])
     assert exit_.value.code == 2
-    assert "belong to paired mode" in capsys.readouterr().err
+    assert "paired mode" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
