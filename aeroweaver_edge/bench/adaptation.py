@@ -56,9 +56,10 @@ from aeroweaver_edge.agent.estimators import Estimator
 from aeroweaver_edge.agent.scripted import Base
 from aeroweaver_edge.bench.episodes import episode_metrics, read_trace
 from aeroweaver_edge.bench.paired_stats import paired_summary
+from aeroweaver_edge.bench.runner import llm_failure_problem, preflight
 from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.errors import RunFailed, UserError
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.llm.embedded import THREADS_ENV
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
@@ -177,7 +178,15 @@ async def run_one(
         "trace": str(trace_path),
         "complete": True,
     }
+    unusable = llm_failure_problem(eps) if selector == "llm" else None
+    if unusable is not None:  # kept to read, rerun on resume; hours of holds are no evidence
+        result.update(complete=False, unusable=unusable)
     write_json_file(run_dir / "result.json", result)
+    if unusable is not None:
+        raise RunFailed(
+            f"{task} seed {seed} beta={variant.beta:g}: {unusable}; fix the endpoint (or "
+            "raise --llm-deadline), then rerun the same command to resume"
+        )
     return result
 
 
@@ -385,6 +394,8 @@ async def run_paired(args: argparse.Namespace, llm: LLMConfig) -> dict[str, Any]
         for seq in range(args.sequences)
         for beta in (0.0, args.beta)
     ]
+    if selector == "llm" and llm.base_url:  # the embedded server is probed as it starts
+        await preflight(llm)
     cells: dict[tuple[str, int, float], dict[str, Any]] = {}
     started = time.monotonic()
     ran = 0
@@ -417,9 +428,15 @@ async def run_paired(args: argparse.Namespace, llm: LLMConfig) -> dict[str, Any]
             )
         cells[(task, seq, beta)] = done
 
-    async with asyncio.TaskGroup() as group:  # a failing cell cancels the rest; rerun resumes
-        for n, (task, seq, beta) in enumerate(todo, 1):
-            group.create_task(cell(n, task, seq, beta), name=f"adaptation-cell-{n}")
+    tasks = [
+        asyncio.create_task(cell(n, *c), name=f"adaptation-cell-{n}") for n, c in enumerate(todo, 1)
+    ]
+    try:  # the first failure as it is (a UserError stays one line); a rerun resumes
+        await asyncio.gather(*tasks)
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
     return summarise(args, cells)
 
 

@@ -146,3 +146,42 @@ def test_a_bad_override_in_the_environment_is_one_line_exit_2(
     assert f"{env}:" in err
     assert repr(value) in err
     assert not out.exists()
+
+
+async def test_a_cell_whose_decisions_failed_at_the_llm_stops_the_run(tmp_path: Path) -> None:
+    """The endpoint answers the probes, then fails every call: the cell is kept to read but
+    not complete (a rerun runs it again), and the run stops with one line instead of
+    summarising hours of holds as adaptation evidence."""
+    from aeroweaver_edge.bench.adaptation import Variant, _load, run_one
+    from aeroweaver_edge.config import LLMConfig
+    from aeroweaver_edge.errors import RunFailed
+    from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
+
+    run_dir = tmp_path / "cell"
+    async with FakeProvider(Policy(status=500, status_after=4)) as fake:  # run's + 3 probes
+        llm = LLMConfig(base_url=fake.base_url, model=fake.model, deadline_s=2.0, retries=0)
+        with pytest.raises(RunFailed, match=r"9 of 9 decisions held because the LLM call"):
+            await run_one(
+                "coverage", 1, Variant(0.8), 1, None, "llm", llm, run_dir, False, 10.0,
+                max_rounds=3,
+            )  # fmt: skip
+    data = json.loads((run_dir / "result.json").read_text())
+    assert data["complete"] is False
+    assert "the endpoint was failing" in data["unusable"]
+    assert _load(run_dir / "result.json") is None  # resumed runs do it again
+
+
+def test_an_unreachable_endpoint_is_one_line_before_any_cell(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "x.json"
+    argv = [
+        "bench", "adaptation", "--base", "llm", "--llm", "http://127.0.0.1:9", "--tasks",
+        "coverage", "--sequences", "1", "--episodes", "1", "--json", str(out),
+    ]  # fmt: skip
+    assert cli(argv) == 2
+    err = capsys.readouterr().err
+    assert "did not answer the start-up probe" in err
+    assert "Traceback" not in err
+    assert not out.exists()
+    assert not (tmp_path / "x-runs" / "runs").exists()
