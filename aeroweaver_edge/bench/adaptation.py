@@ -201,6 +201,8 @@ def _load(path: Path) -> dict[str, Any] | None:
 async def run_all(args: argparse.Namespace, llm: LLMConfig) -> list[dict[str, Any]]:
     out = Path(args.out)
     results = []
+    if args.selector == "llm" and llm.base_url:  # the embedded server is probed as it starts
+        await preflight(llm)
     for task in args.tasks:
         for seed in args.seeds:
             for v in args.variants:

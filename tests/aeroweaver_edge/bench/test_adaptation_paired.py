@@ -171,17 +171,20 @@ async def test_a_cell_whose_decisions_failed_at_the_llm_stops_the_run(tmp_path: 
     assert _load(run_dir / "result.json") is None  # resumed runs do it again
 
 
+@pytest.mark.parametrize("paired", [True, False])
 def test_an_unreachable_endpoint_is_one_line_before_any_cell(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], paired: bool
 ) -> None:
     out = tmp_path / "x.json"
-    argv = [
-        "bench", "adaptation", "--base", "llm", "--llm", "http://127.0.0.1:9", "--tasks",
-        "coverage", "--sequences", "1", "--episodes", "1", "--json", str(out),
-    ]  # fmt: skip
+    argv = ["bench", "adaptation", "--llm", "http://127.0.0.1:9", "--episodes", "1"]
+    if paired:
+        argv += ["--base", "llm", "--sequences", "1", "--json", str(out)]
+    else:
+        argv += ["--out", str(tmp_path / "x-runs")]
     assert cli(argv) == 2
     err = capsys.readouterr().err
     assert "did not answer the start-up probe" in err
     assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
     assert not out.exists()
     assert not (tmp_path / "x-runs" / "runs").exists()
