@@ -471,10 +471,6 @@ def cmd_memory(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    if args.what == "memory":
-        from aeroweaver_edge.bench import memory
-
-        return memory.main(["--records", str(args.records)])
     if args.what == "memory-kill":
         from aeroweaver_edge.bench import memory_kill
 
@@ -788,9 +784,9 @@ def build_parser() -> argparse.ArgumentParser:
         "what",
         choices=BENCH_WHATS,
         help="run: the benchmark (tasks x conditions x seeds; 'aeroweaver bench run --help'); "
-        "with no name and any runner flags, 'aeroweaver bench [--quick] ...' is 'bench run'",
+        "with no name and any runner flags, 'aeroweaver bench [--quick] ...' is 'bench run'. "
+        "run, adaptation and memory take flags of their own ('aeroweaver bench NAME --help')",
     )
-    b.add_argument("--records", type=int_in(1), default=10_000, help="memory: records per role")
     b.add_argument(
         "--kills", type=int_in(1), default=200, help="memory-kill, kill-restart: SIGKILLs"
     )
@@ -881,6 +877,10 @@ BENCH_WHATS = [
 ]
 
 
+# Benchmarks whose every flag is their own: ``aeroweaver bench NAME ...`` is their main.
+OWN_PARSER_BENCHES = {"adaptation": "adaptation", "memory": "memory"}
+
+
 def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
     """``[-v] bench run ...``, or ``bench`` naming no other benchmark (``bench --quick``,
     ``bench --tasks coverage``): (verbose, the runner's own arguments), else None. The
@@ -901,12 +901,18 @@ def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
 def main(argv: Sequence[str] | None = None) -> int:
     given = list(sys.argv[1:] if argv is None else argv)
     verbose = bool(given) and given[0] in ("-v", "--verbose")
-    if given[verbose : verbose + 2] == ["bench", "adaptation"]:  # its own parser
-        from aeroweaver_edge.bench import adaptation
+    own = (
+        given[verbose + 1]
+        if given[verbose : verbose + 1] == ["bench"] and given[verbose + 1 :]
+        else None
+    )
+    if own in OWN_PARSER_BENCHES:  # flags of their own
+        import importlib
 
+        bench = importlib.import_module(f"aeroweaver_edge.bench.{OWN_PARSER_BENCHES[own]}")
         logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING)
         try:
-            return adaptation.main(given[verbose + 2 :], prog="aeroweaver bench adaptation")
+            return int(bench.main(given[verbose + 2 :], prog=f"aeroweaver bench {own}"))
         except (KeyboardInterrupt, asyncio.CancelledError):
             print("aeroweaver: bench stopped; rerun the same command to resume", file=sys.stderr)
             return 130

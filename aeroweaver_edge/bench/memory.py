@@ -21,7 +21,6 @@ vocabulary size and posting-list lengths are realistic, not best case.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import math
@@ -36,6 +35,7 @@ from typing import Any
 
 from aeroweaver_edge.agent.memory import ExperienceMemory
 from aeroweaver_edge.agent.memory_records import Neighbour
+from aeroweaver_edge.cli_errors import ArgumentParser
 from aeroweaver_edge.defaults import MAX_ROUNDS, SENSING_RADIUS_M
 from aeroweaver_edge.wire import MAX_BATCH_RECORDS, ExperienceRecord, Header
 
@@ -243,10 +243,8 @@ def run(
     }
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="aeroweaver bench memory", description="Experience-memory retrieval benchmark."
-    )
+def main(argv: Sequence[str] | None = None, *, prog: str = "aeroweaver bench memory") -> int:
+    parser = ArgumentParser(prog=prog, description="Experience-memory retrieval benchmark.")
     parser.add_argument("--records", type=int, default=10_000, help="records in one role")
     parser.add_argument("--queries", type=int, default=200, help="timed retrievals")
     parser.add_argument("--seed", type=int, default=0)

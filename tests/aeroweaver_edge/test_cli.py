@@ -76,7 +76,7 @@ def test_help_lists_every_command(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("command", "flag"),
-    [("daemon", "--config"), ("sim", "--selector"), ("probe", "--llm"), ("bench", "--records")],
+    [("daemon", "--config"), ("sim", "--selector"), ("probe", "--llm"), ("bench", "--kills")],
 )
 def test_subcommand_help(capsys: pytest.CaptureFixture[str], command: str, flag: str) -> None:
     with pytest.raises(SystemExit) as info:

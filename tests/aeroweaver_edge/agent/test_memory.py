@@ -837,6 +837,23 @@ def test_bench_fill_stores_the_same_records_batched_or_not(tmp_path: Path) -> No
     assert rows[0] == rows[1]
 
 
+def test_the_cli_passes_every_bench_memory_flag(capsys: pytest.CaptureFixture[str]) -> None:
+    """``aeroweaver bench memory`` is the benchmark's own parser (docs/performance.md types
+    ``--writer backlog --check-whole`` there); a flag it lacks is one line, exit 2."""
+    from aeroweaver_edge.cli import main as cli
+
+    argv = ["bench", "memory", "--records", "150", "--queries", "2", "--writer", "backlog"]
+    assert cli([*argv, "--check-whole"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert (result["writer"], result["same_neighbourhood"]) == ("backlog", "2 of 2")
+    with pytest.raises(SystemExit) as exit_:
+        cli(["bench", "memory", "--bogus"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "unrecognized arguments: --bogus" in err
+    assert len(err.strip().splitlines()) == 1
+
+
 def test_bench_backlog_stores_peers_finalised_records(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
