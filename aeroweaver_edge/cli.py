@@ -878,7 +878,7 @@ BENCH_WHATS = [
 
 
 # Benchmarks whose every flag is their own: ``aeroweaver bench NAME ...`` is their main.
-OWN_PARSER_BENCHES = {"adaptation": "adaptation", "memory": "memory"}
+OWN_PARSER_BENCHES = ("adaptation", "memory")
 
 
 def _bench_run_args(argv: Sequence[str]) -> tuple[bool, list[str]] | None:
@@ -909,7 +909,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if own in OWN_PARSER_BENCHES:  # flags of their own
         import importlib
 
-        bench = importlib.import_module(f"aeroweaver_edge.bench.{OWN_PARSER_BENCHES[own]}")
+        bench = importlib.import_module(f"aeroweaver_edge.bench.{own}")
         logging.basicConfig(level=logging.DEBUG if verbose else logging.WARNING)
         try:
             return int(bench.main(given[verbose + 2 :], prog=f"aeroweaver bench {own}"))

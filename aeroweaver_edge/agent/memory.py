@@ -652,10 +652,7 @@ class ExperienceMemory:
     def ingest_many(self, records: Iterable[ExperienceRecord]) -> int:
         """``ingest`` each record in one transaction (a peer's backlog, a late joiner's
         fetch): committed together when all are stored. Returns how many changed."""
-        changed, errors = 0, self.write_errors
-        with self.batch(own=False):
-            changed = sum(1 for record in records if self.ingest(record))
-        return changed if self.write_errors == errors else 0  # rolled back: nothing stored
+        return self.store_peers((record, True) for record in records)  # no crediting
 
     def store_peers(self, batch: Iterable[tuple[ExperienceRecord, bool]]) -> int:
         """Store one round's intake of peers' records in one transaction: ``ingest``

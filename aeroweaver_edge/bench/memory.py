@@ -145,7 +145,7 @@ def fill_backlog(memory: ExperienceMemory, records: int, rng: random.Random) -> 
                 inv = rng.choice(options)
                 rows.append((rnd, text, inv, _reward(rng, inv)))
             for rnd, text, inv, reward in reversed(rows):  # G_t = r_t + gamma G_t+1
-                ret = reward + 0.95 * ret
+                ret = reward + memory.gamma * ret
                 h = Header(sender=uav, epoch=1, seq=episode * 100 + rnd, stamp=0.0)
                 record = ExperienceRecord(
                     h=h, task=TASK, role=ROLE, uav=uav, episode=episode, round=rnd,

@@ -54,6 +54,17 @@ def _utc(ts: float) -> str:
     return datetime.fromtimestamp(ts, tz=UTC).strftime("%Y-%m-%d %H:%M")
 
 
+def _merged(spans: Iterable[tuple[float, float]], gap: float) -> list[list[float]]:
+    """The intervals joined where one starts at most ``gap`` seconds after the last ended."""
+    out: list[list[float]] = []
+    for start, end in sorted(spans):
+        if out and start - out[-1][1] <= gap:
+            out[-1][1] = max(out[-1][1], end)
+        else:
+            out.append([start, end])
+    return out
+
+
 def run_time(cells: Iterable[dict[str, Any]]) -> RunTime:
     rt = RunTime()
     spans: list[tuple[float, float]] = []
@@ -74,24 +85,8 @@ def run_time(cells: Iterable[dict[str, Any]]) -> RunTime:
             loads.append(float(before[0]))
     if loads:
         rt.load = (min(loads), max(loads))
-    spans.sort()
-    sitting: list[float] = []
-    merged: list[list[float]] = []
-    for start, end in spans:
-        if merged and start <= merged[-1][1]:
-            merged[-1][1] = max(merged[-1][1], end)
-        else:
-            merged.append([start, end])
-    for start, end in merged:
-        rt.busy_s += end - start
-        if sitting and start - sitting[1] <= SITTING_GAP_S:
-            sitting[1] = end
-        else:
-            if sitting:
-                rt.sittings.append((_utc(sitting[0]), _utc(sitting[1])))
-            sitting = [start, end]
-    if sitting:
-        rt.sittings.append((_utc(sitting[0]), _utc(sitting[1])))
+    rt.busy_s = sum(end - start for start, end in _merged(spans, 0.0))
+    rt.sittings = [(_utc(start), _utc(end)) for start, end in _merged(spans, SITTING_GAP_S)]
     return rt
 
 
