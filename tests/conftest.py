@@ -10,11 +10,13 @@ terminal summary says what was missing and whether that was allowed.
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+import threading
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import pytest
 
+from tests.helpers.hang_dump import dump_asyncio_tasks, timeout_s
 from tests.helpers.requirements import ALLOW_SKIP_ENV, REQUIREMENTS, allowed_skips, decide, missing
 from tests.helpers.zenoh_net import ZenohNet
 
@@ -45,6 +47,23 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
                 f"{why}. Install it, or run with {ALLOW_SKIP_ENV}={name} to skip these tests.",
                 pytrace=False,
             )
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    """Five seconds before pytest-timeout fires, print where every asyncio task waits:
+    its own dump shows threads only, and a hung async test's main thread is in ``select``."""
+    timeout = timeout_s(item)
+    timer = None
+    if timeout > 10:
+        timer = threading.Timer(timeout - 5, dump_asyncio_tasks, args=(item.nodeid,))
+        timer.daemon = True
+        timer.start()
+    try:
+        return (yield)
+    finally:
+        if timer is not None:
+            timer.cancel()
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:

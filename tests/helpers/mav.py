@@ -87,6 +87,17 @@ async def emulated(
         await host.aclose()
 
 
+async def stop_within(task: asyncio.Task[object], timeout_s: float, what: str) -> None:
+    """Cancel ``task`` and wait (bounded) for it to finish: a shutdown that hangs fails
+    here by name instead of running into the test's overall timeout."""
+    task.cancel()
+    done, _ = await asyncio.wait({task}, timeout=timeout_s)
+    if not done:
+        raise AssertionError(f"{what} did not stop within {timeout_s:g} s of its cancellation")
+    if not task.cancelled() and task.exception() is not None:
+        raise task.exception()  # type: ignore[misc]
+
+
 async def until(cond: Callable[[], bool], timeout_s: float = 5.0, what: str = "condition") -> float:
     """Wait (bounded) until ``cond()``; returns the seconds it took, fails on timeout."""
     started = time.monotonic()

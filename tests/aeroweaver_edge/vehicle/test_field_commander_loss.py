@@ -6,7 +6,6 @@ loss": hold, RTL only if configured). Real MAVLink bytes to the emulator, real z
 from __future__ import annotations
 
 import asyncio
-import contextlib
 
 import pytest
 
@@ -16,7 +15,7 @@ from aeroweaver_edge.decision_round import RoundOutcome
 from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
 from commander.commander import Commander
 from commander.harness import plan_for_task
-from tests.helpers.mav import FAST, free_udp_ports, until
+from tests.helpers.mav import FAST, free_udp_ports, stop_within, until
 from tests.helpers.zenoh_net import ZenohNet
 
 pytestmark = pytest.mark.slow
@@ -96,9 +95,7 @@ async def test_a_field_daemon_holds_and_waits_when_the_commander_disappears(
             await until(lambda: ap.mode == "AUTO.LAND", 10, "lands at mission end")
             assert not daemon.done()
         finally:
-            daemon.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await daemon
+            await stop_within(daemon, 30.0, "the daemon")
             await first.aclose()
             if second is not None:
                 await second.aclose()
