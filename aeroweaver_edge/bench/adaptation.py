@@ -152,7 +152,7 @@ async def run_one(
         "variant": variant.name,
         "beta": variant.beta,
         "finalised_only": variant.finalised_only,
-        "base": base,
+        "base": base if selector == "scripted" else selector,  # the scripted base is unused
         "estimator": estimator,
         "selector": summary["selector"],
         "model": summary["model"],

@@ -167,6 +167,7 @@ async def test_a_cell_whose_decisions_failed_at_the_llm_stops_the_run(tmp_path: 
             )  # fmt: skip
     data = json.loads((run_dir / "result.json").read_text())
     assert data["complete"] is False
+    assert data["base"] == "llm"  # the model decided, not the scripted base
     assert "the endpoint was failing" in data["unusable"]
     assert _load(run_dir / "result.json") is None  # resumed runs do it again
 
