@@ -420,7 +420,7 @@ async def run_paired(args: argparse.Namespace, llm: LLMConfig) -> dict[str, Any]
                 for t, q, b in todo
                 if _load(_cell_dir(out, args.base, t, q, b, args.estimator) / "result.json") is None
             )
-            per = (time.monotonic() - started) / ran / max(1, args.jobs)
+            per = (time.monotonic() - started) / ran  # wall time per cell, jobs included
             print(
                 f"[{n}/{len(todo)}] {task} seq {seq} beta={beta:g}: mean return "
                 f"{statistics.fmean(_returns(done)):.2f} ({done['wall_s']:.1f} s; "
