@@ -72,7 +72,8 @@ Speed
 
 Modules
     ``memory_store`` (SQLite file, schema, migration, quarantine, transactions),
-    ``memory_index`` (the neighbourhood), ``memory_returns`` (G_t bookkeeping),
+    ``memory_index`` (the group index and its scoring), ``memory_select`` (the
+    neighbourhood: K places, sender caps), ``memory_returns`` (G_t bookkeeping),
     ``memory_senders`` (per-sender caps), ``memory_records`` (record types),
     ``memory_async`` (the asyncio wrapper); this module ties them into one memory and keeps
     the names other modules import.
@@ -93,16 +94,7 @@ from typing import Final, TypeVar
 
 from aeroweaver_edge.agent.estimators import PAPER, Estimator
 from aeroweaver_edge.agent.memory_async import AsyncExperienceMemory
-from aeroweaver_edge.agent.memory_index import (
-    SMALL_GROUP,
-    Group,
-    Selection,
-    prepare,
-    select_indexed,
-    select_python,
-    select_scan,
-    values,
-)
+from aeroweaver_edge.agent.memory_index import SMALL_GROUP, Group, prepare, values
 from aeroweaver_edge.agent.memory_records import (
     COLUMNS,
     LOCAL,
@@ -115,6 +107,7 @@ from aeroweaver_edge.agent.memory_records import (
     stored,
 )
 from aeroweaver_edge.agent.memory_returns import install_functions, peer_credit, return_at
+from aeroweaver_edge.agent.memory_select import Retrieval, neighbours
 from aeroweaver_edge.agent.memory_senders import (
     MAX_BYTES_PER_SENDER,
     MAX_RECORDS_PER_SENDER,
@@ -170,11 +163,9 @@ class ExperienceMemory:
         if not 0.0 < max_sender_share <= 1.0:
             raise ValueError(f"max_sender_share {max_sender_share} must be within (0, 1]")
         self._caps = SenderCaps(max_records_per_sender, max_bytes_per_sender)
-        self.max_sender_share = max_sender_share
         self.evicted = 0  # peers' records evicted by the per-sender caps
         self.gamma = gamma
-        self.neighbourhood = neighbourhood
-        self.finalised_only = finalised_only
+        self.retrieval = Retrieval(neighbourhood, max_sender_share, finalised_only)
         self.estimator = estimator
         self.run = run or new_run_id()
         self._groups: dict[tuple[str, str], Group] = {}
@@ -723,110 +714,33 @@ class ExperienceMemory:
     def __len__(self) -> int:
         return int(self._db.execute("SELECT count(*) FROM records").fetchone()[0])
 
-    def _select(self, group: Group, tokens: frozenset[str]) -> tuple[list[int], list[float]]:
-        """Positions of the neighbourhood (best first) and their Jaccard similarities.
-        Peers holding more of the group than this daemon are capped to
-        ``max_sender_share`` of the places (none in a balanced, honest swarm: then this is
-        exactly the uncapped selection)."""
-        heavy = self._heavy_origins(group)
-        if not heavy:
-            return self._ordered(group, tokens, self.neighbourhood)
-        # The capped pick walks the best-first order until K places are filled. Every
-        # selection returns a prefix of one total order (similarity, then recency), so
-        # a prefix that fills K gives what the whole order would: widen it only when the
-        # caps left places open (a late joiner, whose peers all hold more than it does,
-        # would otherwise score the whole group every round).
-        k = 4 * self.neighbourhood
-        while True:
-            pos, sim = self._ordered(group, tokens, k)
-            capped = self._capped(group, pos, sim, heavy)
-            if len(capped[0]) >= self.neighbourhood or len(pos) < k:
-                return capped
-            k *= 4
+    @property
+    def neighbourhood(self) -> int:
+        """K, the places of a neighbourhood."""
+        return self.retrieval.k
 
-    def _ordered(self, group: Group, tokens: frozenset[str], k: int) -> Selection:
-        """The first ``k`` of the group's best-first order."""
-        if len(group) <= SMALL_GROUP:
-            return self._select_python(group, tokens, k)
-        return self._select_numpy(group, tokens, k)
+    @neighbourhood.setter
+    def neighbourhood(self, k: int) -> None:
+        self.retrieval.k = k
 
-    def _heavy_origins(self, group: Group) -> set[int]:
-        """Peers (origin ids) with more live records in ``group`` than this daemon's own."""
-        if self.max_sender_share >= 1.0:
-            return set()
-        own_id = group.origin_ids.get(LOCAL)
-        own = group.origin_count[own_id] if own_id is not None else 0
-        return {
-            oid for oid, n in enumerate(group.origin_count) if oid != own_id and n > max(own, 0)
-        }
+    @property
+    def finalised_only(self) -> bool:
+        return self.retrieval.finalised_only
 
-    def _capped(
-        self, group: Group, pos: list[int], sim: list[float], heavy: set[int]
-    ) -> tuple[list[int], list[float]]:
-        """The best-first ``pos`` cut to K places with each heavy origin at most its cap."""
-        cap = max(1, int(self.max_sender_share * self.neighbourhood))
-        taken: dict[int, int] = {}
-        out_pos: list[int] = []
-        out_sim: list[float] = []
-        for i, s in zip(pos, sim, strict=True):
-            oid = group.origin[i]
-            if oid in heavy:
-                if taken.get(oid, 0) >= cap:
-                    continue
-                taken[oid] = taken.get(oid, 0) + 1
-            out_pos.append(i)
-            out_sim.append(s)
-            if len(out_pos) >= self.neighbourhood:
-                break
-        return out_pos, out_sim
-
-    def _select_python(
-        self, group: Group, tokens: frozenset[str], k: int | None = None
-    ) -> Selection:
-        k = self.neighbourhood if k is None else k
-        return select_python(group, tokens, k, self.finalised_only)
-
-    def _select_numpy(
-        self, group: Group, tokens: frozenset[str], k: int | None = None
-    ) -> Selection:
-        """The indexed selection (``memory_index.select_indexed``); same records as the
-        Python one and as ``_select_scan``."""
-        k = self.neighbourhood if k is None else k
-        return select_indexed(group, tokens, k, self.finalised_only)
-
-    def _select_scan(self, group: Group, tokens: frozenset[str], k: int | None = None) -> Selection:
-        k = self.neighbourhood if k is None else k
-        return select_scan(group, tokens, k, self.finalised_only)
+    @property
+    def max_sender_share(self) -> float:
+        return self.retrieval.max_sender_share
 
     def neighbourhood_of(self, task: str, role: str, state_text: str) -> list[Neighbour]:
         """The retrieved neighbourhood, best first (what ``advantages`` averages over)."""
         group = self._group(task, role)
-        return self._neighbours(group, *self._select(group, tokenise(state_text)))
+        return neighbours(group, *self.retrieval.select(group, tokenise(state_text)))
 
     def whole_group_neighbourhood(self, task: str, role: str, state_text: str) -> list[Neighbour]:
-        """The neighbourhood found by scoring every record of the group and walking the
-        whole best-first order under the sender caps: no index, no early stop. What
-        ``neighbourhood_of`` must equal; for tests and benchmarks."""
+        """``Retrieval.whole_group``: what ``neighbourhood_of`` must equal, found with no
+        index and no early stop; for tests and benchmarks."""
         group = self._group(task, role)
-        pos, sim = select_scan(group, tokenise(state_text), len(group), self.finalised_only)
-        heavy = self._heavy_origins(group)
-        if heavy:
-            return self._neighbours(group, *self._capped(group, pos, sim, heavy))
-        return self._neighbours(group, pos[: self.neighbourhood], sim[: self.neighbourhood])
-
-    @staticmethod
-    def _neighbours(group: Group, pos: list[int], sim: list[float]) -> list[Neighbour]:
-        return [
-            Neighbour(
-                group.keys[i][1:],
-                group.skills[group.skill[i]],
-                v,
-                s,
-                group.seq[i],
-                group.keys[i][0],
-            )
-            for i, s, v in zip(pos, sim, values(group, pos), strict=True)
-        ]
+        return neighbours(group, *self.retrieval.whole_group(group, tokenise(state_text)))
 
     def advantages(
         self, task: str, role: str, state_text: str, skills: Iterable[str]
@@ -839,7 +753,7 @@ class ExperienceMemory:
         group = self._guard("retrieval", None, lambda: self._group(task, role), write=False)
         if group is None:
             return dict.fromkeys(names, 0.0)
-        pos, _ = self._select(group, tokenise(state_text))
+        pos, _ = self.retrieval.select(group, tokenise(state_text))
         if not pos:
             return dict.fromkeys(names, 0.0)
         return self.estimator.advantages(

@@ -23,6 +23,7 @@ from aeroweaver_edge.agent.memory import (
     StoredRecord,
     skill_of,
 )
+from aeroweaver_edge.agent.memory_index import select_indexed, select_python
 from aeroweaver_edge.agent.state_tokens import bucket, jaccard, tokenise
 from aeroweaver_edge.bench import memory as bench
 from aeroweaver_edge.config import AgentConfig
@@ -912,4 +913,5 @@ def test_python_and_numpy_retrieval_select_the_same_neighbourhood(
         group = mem._group(T, R)
         for _ in range(60):
             query = tokenise(" ".join(rnd.sample(words, rnd.randint(0, 5))) + " 2 m")
-            assert mem._select_python(group, query) == mem._select_numpy(group, query)
+            python = select_python(group, query, mem.neighbourhood, finalised_only)
+            assert python == select_indexed(group, query, mem.neighbourhood, finalised_only)
