@@ -195,9 +195,11 @@ def cmd_daemon(args: argparse.Namespace) -> int:
     # signals -- imports, config, sessions opening -- must still run the ``finally`` below,
     # or a run whose daemons were all still starting leaves its directory behind.
     signal.signal(signal.SIGTERM, _stop_now)
-    # Started by a simulated run: die with it, and the last one out removes its directory.
-    member = attach_to_run(os.environ)
+    member = None
     try:
+        # Started by a simulated run: die with it, and the last one out removes its
+        # directory. Inside the ``try``: an orphan signals itself here.
+        member = attach_to_run(os.environ)
         return _daemon(args)
     except Stopped as stop:  # stopped before the loop ran
         return 0 if stop.signum == signal.SIGTERM else 130
@@ -221,8 +223,13 @@ class StopBound:
     def __init__(self, bound_s: float) -> None:
         self.bound_s = bound_s
         self.daemon: UavDaemon | None = None
+        self._armed = False
 
     def arm(self, status: int) -> None:
+        """Start the bound; a repeated stop (another SIGTERM) does not restart it."""
+        if self._armed:
+            return
+        self._armed = True
         threading.Thread(target=self._watch, args=(status,), name="stop-bound", daemon=True).start()
 
     def _watch(self, status: int) -> None:
@@ -276,8 +283,11 @@ def _daemon(args: argparse.Namespace) -> int:
         supervision.stopping(line)
         bound.arm(0 if signum == signal.SIGTERM else 130)
 
+    def late_sigterm(signum: int, _frame: object) -> None:
+        bound.arm(0)  # the flight is done; what is left of the teardown gets the bound
+
     try:
-        stats = _run(supervised(), on_signal=stopping)
+        stats = _run(supervised(), on_signal=stopping, sigterm_after=late_sigterm)
     except Stopped as stop:
         # systemctl stop sends SIGTERM: a clean, expected end (exit 0, the unit is not
         # marked failed). Ctrl-C keeps the shell's convention.

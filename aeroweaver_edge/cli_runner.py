@@ -24,10 +24,18 @@ class Stopped(Exception):
 
 
 def run_until_signal(
-    coro: Coroutine[Any, Any, T], on_signal: Callable[[int], None] | None = None
+    coro: Coroutine[Any, Any, T],
+    on_signal: Callable[[int], None] | None = None,
+    *,
+    sigterm_after: Callable[[int, Any], None] | None = None,
 ) -> T:
     """Run a coroutine; SIGTERM and SIGINT cancel it so every session is closed, then
-    raise ``Stopped`` naming the signal."""
+    raise ``Stopped`` naming the signal.
+
+    ``sigterm_after`` takes SIGTERM over from the loop as soon as the coroutine is done,
+    before the loop's teardown puts the default action back: a process that can get
+    SIGTERM more than once (the parent-death signal of a multithreaded parent comes once
+    per exiting thread) must not die of a repeat while it is still leaving."""
     received: list[int] = []
 
     async def main() -> T:
@@ -43,7 +51,12 @@ def run_until_signal(
 
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, stop, sig)
-        return await coro
+        try:
+            return await coro
+        finally:
+            if sigterm_after is not None:
+                loop.remove_signal_handler(signal.SIGTERM)
+                signal.signal(signal.SIGTERM, sigterm_after)
 
     try:
         return asyncio.run(main())

@@ -217,7 +217,7 @@ class Store:
         """Pragmas, schema (created or migrated), and the rebuilds a changed tokeniser or
         gamma requires. Every step is a transaction, so concurrent openers agree."""
         conn.execute(f"PRAGMA busy_timeout={int(BUSY_TIMEOUT_S * 1000)}")
-        mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+        mode = _enter_wal(conn)
         if mode not in ("wal", "memory"):
             log.warning("experience memory: journal mode is %s, not WAL", mode)
         conn.execute(f"PRAGMA synchronous={'FULL' if self._durable else 'NORMAL'}")
@@ -397,6 +397,23 @@ def _statements(script: str) -> list[str]:
             out.append(current.strip())
             current = ""
     return out
+
+
+def _enter_wal(conn: sqlite3.Connection) -> str:
+    """Switch to WAL, retrying for ``BUSY_TIMEOUT_S``: SQLite returns SQLITE_BUSY at once,
+    without the busy handler, when two processes switch a fresh file at the same moment
+    (it declines to wait where waiting could deadlock), so the busy timeout alone does
+    not cover the first open of a shared file."""
+    deadline = time.monotonic() + BUSY_TIMEOUT_S
+    pause = 0.005
+    while True:
+        try:
+            return str(conn.execute("PRAGMA journal_mode=WAL").fetchone()[0])
+        except sqlite3.OperationalError as exc:
+            if not _transient(exc) or time.monotonic() >= deadline:
+                raise
+        time.sleep(pause)  # the open runs on a worker thread, never on the event loop
+        pause = min(pause * 2, 0.1)
 
 
 def _transient(exc: sqlite3.Error) -> bool:

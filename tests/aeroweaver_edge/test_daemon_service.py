@@ -182,3 +182,29 @@ def test_sigterm_during_start_up_exits_0_promptly(tmp_path: Path, after_s: float
         procs.stop_all()
     assert code == 0, procs.log("uav0")
     assert took < 3.0, procs.log("uav0")
+
+
+def test_sigterm_repeated_while_stopping_still_exits_0(tmp_path: Path) -> None:
+    """The parent-death signal can come more than once: the kernel sends it again each
+    time a multithreaded parent's dying thread hands the daemon to the next one (stop 28's
+    suite: one daemon of a killed run died of its second SIGTERM, after its loop had put
+    the default handler back). Every SIGTERM after the first is part of the same stop."""
+    cfg = daemon_config(
+        tmp_path, "uav0", "up", None,
+        extra=f'[vehicle]\nbackend = "mavlink"\nurl = "udpin://127.0.0.1:{free_port()}"\n'
+        "connect_timeout_s = 30\n",
+    )  # fmt: skip
+    procs = Procs(tmp_path)
+    try:
+        procs.start("uav0", "daemon", "--config", str(cfg))
+        time.sleep(2.0)  # up to the vehicle link: the loop owns SIGTERM
+        proc = procs.procs["uav0"]
+        assert proc.poll() is None, procs.log("uav0")
+        started = time.monotonic()
+        while proc.poll() is None and time.monotonic() - started < 10.0:
+            proc.send_signal(signal.SIGTERM)  # a burst until it is gone
+            time.sleep(0.0005)
+        code = proc.wait(timeout=10)
+    finally:
+        procs.stop_all()
+    assert code == 0, procs.log("uav0")

@@ -4,8 +4,10 @@ concurrent writers, required memory, and kill -9 consistency. Real SQLite files 
 from __future__ import annotations
 
 import math
+import multiprocessing
 import sqlite3
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -127,6 +129,31 @@ def test_two_open_writers_interleave_without_key_errors(tmp_path: Path) -> None:
     with ExperienceMemory(db) as m:
         assert len(m) == 8
     assert check_file(db) == []
+
+
+def _open_in_step(directory: str, files: int, barrier: Any) -> None:
+    """One process of the race below: open file i when the other process does."""
+    from aeroweaver_edge.agent.memory_store import Store
+
+    for i in range(files):
+        barrier.wait(timeout=30)  # a failed sibling breaks the barrier: no hang
+        Store(Path(directory) / f"m{i}.sqlite3", gamma=0.5, required=True).db.close()
+
+
+def test_two_processes_opening_a_fresh_file_at_once_both_get_it(tmp_path: Path) -> None:
+    """SQLite answers the second WAL switch of a fresh file with SQLITE_BUSY at once,
+    past the busy timeout (stop 27's CI failure: 30 of 120 such opens failed)."""
+    ctx = multiprocessing.get_context("spawn")  # no fork of a process with live threads
+    barrier = ctx.Barrier(2)
+    procs = [ctx.Process(target=_open_in_step, args=(str(tmp_path), 60, barrier)) for _ in range(2)]
+    for proc in procs:
+        proc.start()
+    for proc in procs:
+        proc.join(timeout=120)
+        if proc.is_alive():
+            proc.kill()
+    assert [proc.exitcode for proc in procs] == [0, 0]
+    assert all(check_file(tmp_path / f"m{i}.sqlite3") == [] for i in range(60))
 
 
 def test_shared_records_are_deduplicated_by_run(tmp_path: Path) -> None:
