@@ -163,15 +163,20 @@ def test_router_killed_mid_mission_stops_it_and_names_the_lost_uavs(tmp_path: Pa
         procs.stop_all()
 
 
+def _daemon_with_a_silent_vehicle(root: Path) -> Path:
+    """uav0 on a MAVLink link nobody answers (30 s connect timeout): it stays starting."""
+    return daemon_config(
+        root, "uav0", "up", None,
+        extra=f'[vehicle]\nbackend = "mavlink"\nurl = "udpin://127.0.0.1:{free_port()}"\n'
+        "connect_timeout_s = 30\n",
+    )  # fmt: skip
+
+
 @pytest.mark.parametrize("after_s", [0.6, 1.5, 3.0])
 def test_sigterm_during_start_up_exits_0_promptly(tmp_path: Path, after_s: float) -> None:
     """Imports, config, the mesh, then a vehicle link that never answers (mavlink, 30 s
     connect timeout): a stop at any of these points ends the daemon at once with 0."""
-    cfg = daemon_config(
-        tmp_path, "uav0", "up", None,
-        extra=f'[vehicle]\nbackend = "mavlink"\nurl = "udpin://127.0.0.1:{free_port()}"\n'
-        "connect_timeout_s = 30\n",
-    )  # fmt: skip
+    cfg = _daemon_with_a_silent_vehicle(tmp_path)
     procs = Procs(tmp_path)
     try:
         procs.start("uav0", "daemon", "--config", str(cfg))
@@ -189,11 +194,7 @@ def test_sigterm_repeated_while_stopping_still_exits_0(tmp_path: Path) -> None:
     time a multithreaded parent's dying thread hands the daemon to the next one (stop 28's
     suite: one daemon of a killed run died of its second SIGTERM, after its loop had put
     the default handler back). Every SIGTERM after the first is part of the same stop."""
-    cfg = daemon_config(
-        tmp_path, "uav0", "up", None,
-        extra=f'[vehicle]\nbackend = "mavlink"\nurl = "udpin://127.0.0.1:{free_port()}"\n'
-        "connect_timeout_s = 30\n",
-    )  # fmt: skip
+    cfg = _daemon_with_a_silent_vehicle(tmp_path)
     procs = Procs(tmp_path)
     try:
         procs.start("uav0", "daemon", "--config", str(cfg))
