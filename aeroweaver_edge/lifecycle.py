@@ -12,6 +12,11 @@ goes away.
 - ``die_with_parent``: a child process started by a run gets SIGTERM when its parent dies,
   where the platform can say so (Linux ``PR_SET_PDEATHSIG``); elsewhere the world's token
   covers the same case, only later.
+
+Timeouts are ``async with asyncio.timeout(...)``, never ``asyncio.wait_for``: on Python 3.11
+``wait_for`` drops a cancellation that lands in the same loop iteration as its result
+(CPython gh-86296), and a task that loses its cancel runs on while ``cancel_all`` waits for
+it forever (``tests/test_async_hygiene.py`` keeps it out).
 """
 
 from __future__ import annotations

@@ -165,7 +165,8 @@ async def _stop_attacker(procs: list[asyncio.subprocess.Process]) -> dict[str, A
     if proc.returncode is None:
         proc.send_signal(signal.SIGTERM)
     try:
-        out, _ = await asyncio.wait_for(proc.communicate(), 15.0)
+        async with asyncio.timeout(15.0):
+            out, _ = await proc.communicate()
     except TimeoutError:
         proc.kill()
         out, _ = await proc.communicate()

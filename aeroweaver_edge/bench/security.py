@@ -145,7 +145,8 @@ async def _ping_pong(a: Mesh, b: Mesh, n: int) -> list[float]:
     for _ in range(200):  # warm up until the subscriptions are known both ways
         ping(-1)
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(got.get(), 0.05)
+            async with asyncio.timeout(0.05):
+                await got.get()
             break
     while not got.empty():
         got.get_nowait()
@@ -153,7 +154,8 @@ async def _ping_pong(a: Mesh, b: Mesh, n: int) -> list[float]:
     for i in range(n):
         t0 = time.perf_counter()
         ping(i)
-        await asyncio.wait_for(got.get(), 5.0)
+        async with asyncio.timeout(5.0):
+            await got.get()
         times.append(time.perf_counter() - t0)
     return times
 

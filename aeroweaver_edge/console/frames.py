@@ -173,7 +173,8 @@ class FrameStore:
         if self.closed:
             return
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(event.wait(), timeout_s)
+            async with asyncio.timeout(timeout_s):
+                await event.wait()
 
     async def wait_frame(self, timeout_s: float, after: int) -> None:
         """Wait up to ``timeout_s`` unless a frame newer than ``after`` arrives first."""

@@ -464,7 +464,8 @@ async def serve(
         except asyncio.CancelledError:  # Ctrl-C: let uvicorn shut the app down, then go
             http.should_exit = True
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(task, 5.0)
+                async with asyncio.timeout(5.0):
+                    await task
             raise
         finally:
             sock.close()

@@ -162,7 +162,8 @@ class CommandClient:
             deadline = self.timeout_s
             while True:
                 try:
-                    ack = await asyncio.wait_for(asyncio.shield(ack_fut), deadline)
+                    async with asyncio.timeout(deadline):  # a cancel is never swallowed
+                        ack = await asyncio.shield(ack_fut)
                 except TimeoutError:
                     ack_fut.cancel()
                     break

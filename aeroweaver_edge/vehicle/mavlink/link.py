@@ -198,11 +198,7 @@ class FlightLink:
     async def wait_for(
         self, kind: str, pred: Predicate = lambda _m: True, timeout_s: float = 1.0
     ) -> Message | None:
-        fut = self.expect(kind, pred)
-        try:
-            return await asyncio.wait_for(fut, timeout_s)
-        except TimeoutError:
-            return None
+        return await self.wait_future(self.expect(kind, pred), timeout_s)
 
     def age(self, kind: str) -> float:
         """Seconds since the last ``kind`` message (inf if never)."""
@@ -274,6 +270,7 @@ class FlightLink:
     async def wait_future(self, fut: asyncio.Future[Message], timeout_s: float) -> Message | None:
         """Await a future from :meth:`expect`; None (and the future cancelled) on timeout."""
         try:
-            return await asyncio.wait_for(fut, timeout_s)
+            async with asyncio.timeout(timeout_s):  # never wait_for: see lifecycle's docstring
+                return await fut
         except TimeoutError:
             return None
