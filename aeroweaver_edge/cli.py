@@ -194,7 +194,7 @@ def cmd_daemon(args: argparse.Namespace) -> int:
     # A SIGTERM (the parent-death signal, systemctl stop) before the event loop handles
     # signals -- imports, config, sessions opening -- must still run the ``finally`` below,
     # or a run whose daemons were all still starting leaves its directory behind.
-    signal.signal(signal.SIGTERM, _stop_now)
+    previous = signal.signal(signal.SIGTERM, _stop_now)
     member = None
     try:
         # Started by a simulated run: die with it, and the last one out removes its
@@ -208,6 +208,11 @@ def cmd_daemon(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if member is not None:
             member.leave()
+        # The CLI process keeps ignoring SIGTERM to its very end (interpreter shutdown puts
+        # any Python handler back to the default action, which a late signal would die of);
+        # a program that called us in-process gets its own handler back.
+        if previous is not cli_early.exit_early:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
 
 
 STOP_BOUND_S = 2.0

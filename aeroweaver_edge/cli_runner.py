@@ -43,10 +43,14 @@ def run_until_signal(
         loop = asyncio.get_running_loop()
 
         def stop(signum: int) -> None:
+            repeat = signal.SIGTERM in received and signum == signal.SIGTERM
             if not received and on_signal is not None:
                 on_signal(signum)
             received.append(signum)
-            if task is not None:
+            # A repeated SIGTERM (the parent-death signal comes once per exiting thread of
+            # the parent; systemd may resend) must not cut the clean-up the first one
+            # started: a hold, a landing, closing the link. A second Ctrl-C still does.
+            if task is not None and not repeat:
                 task.cancel()
 
         for sig in (signal.SIGTERM, signal.SIGINT):

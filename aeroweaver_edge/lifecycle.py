@@ -30,7 +30,7 @@ import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable, Coroutine
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 from aeroweaver_edge.errors import RunFailed
 
@@ -43,13 +43,34 @@ T = TypeVar("T")
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 
 
+# A cancelled task still running after this lost its cancel and is cancelled again; longer
+# than any clean-up we bound (the flight's finish: 10 s), so none is cut short.
+CANCEL_GRACE_S: Final = 30.0
+
+
 async def cancel_all(tasks: list[asyncio.Task[Any]]) -> None:
-    """Cancel every task, wait for each to finish, and empty the list."""
+    """Cancel every task, wait for each to finish, and empty the list.
+
+    A task still running ``CANCEL_GRACE_S`` after its cancel lost it (a library that
+    swallows cancellation, as 3.11's ``wait_for`` can): it is named in the log and
+    cancelled again, instead of the shutdown waiting for it forever."""
     for t in tasks:
         t.cancel()
     for t in tasks:
+        while not t.done():
+            try:
+                await asyncio.wait({t}, timeout=CANCEL_GRACE_S)
+            except asyncio.CancelledError:  # our own stop, repeated: t has its cancel already,
+                continue  # and cancelling it again would cut its clean-up short
+            if not t.done():
+                log.error(
+                    "task %s still running %g s after its cancel; cancelling it again",
+                    t.get_name(),
+                    CANCEL_GRACE_S,
+                )
+                t.cancel()
         with contextlib.suppress(asyncio.CancelledError):
-            await t
+            await t  # done: its own failure, if it failed, goes to the caller as before
     tasks.clear()
 
 

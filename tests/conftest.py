@@ -10,6 +10,7 @@ terminal summary says what was missing and whether that was allowed.
 
 from __future__ import annotations
 
+import signal
 import threading
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
@@ -81,6 +82,17 @@ def _empty_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _elsewhere(_empty_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Not the repository root: a relative path in a test fails here, in every run."""
     monkeypatch.chdir(_empty_dir)
+
+
+@pytest.fixture(autouse=True)
+def _signal_handlers_kept() -> Iterator[None]:
+    """Whatever a test's in-process command does to SIGTERM/SIGINT ends with the test: a
+    SIG_IGN left behind is inherited by every process a later test starts."""
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    yield
+    for sig, handler in saved.items():
+        if handler is not None:
+            signal.signal(sig, handler)
 
 
 @pytest.fixture

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -64,6 +65,21 @@ def test_daemon_with_a_missing_config_exits_2(
 ) -> None:
     assert main(["daemon", "--config", str(tmp_path / "absent.toml")]) == 2
     assert "absent.toml: cannot read" in capsys.readouterr().err
+
+
+def test_an_in_process_daemon_leaves_sigterm_as_it_found_it(tmp_path: Path) -> None:
+    """``cmd_daemon`` ignores SIGTERM while it leaves; a program that called it (a test,
+    an embedding) must not keep SIG_IGN, which every process it starts would inherit."""
+
+    def mine(_signum: int, _frame: object) -> None:
+        pass
+
+    before = signal.signal(signal.SIGTERM, mine)
+    try:
+        assert main(["daemon", "--config", str(tmp_path / "absent.toml")]) == 2
+        assert signal.getsignal(signal.SIGTERM) is mine
+    finally:
+        signal.signal(signal.SIGTERM, before)
 
 
 def test_help_lists_every_command(tmp_path: Path) -> None:

@@ -1,0 +1,67 @@
+"""``run_until_signal``: the first SIGTERM or SIGINT cancels the command so its sessions
+close; a repeated SIGTERM does not cut that clean-up, a second Ctrl-C does; after the
+coroutine, ``sigterm_after`` owns SIGTERM. Real signals to this process."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from aeroweaver_edge.cli_runner import Stopped, run_until_signal
+
+
+@pytest.fixture(autouse=True)
+def _handlers_restored() -> Iterator[None]:
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)
+
+
+def _stopped_twice(signum: int, cleaned: list[str]) -> Stopped:
+    async def command() -> None:
+        try:
+            os.kill(os.getpid(), signum)
+            await asyncio.sleep(30)
+        finally:
+            os.kill(os.getpid(), signum)  # the same signal again, during the clean-up
+            await asyncio.sleep(0.3)
+            cleaned.append("closed")
+
+    with pytest.raises(Stopped) as info:
+        run_until_signal(command())
+    return info.value
+
+
+def test_a_repeated_sigterm_lets_the_clean_up_finish() -> None:
+    cleaned: list[str] = []
+    stop = _stopped_twice(signal.SIGTERM, cleaned)
+    assert stop.signum == signal.SIGTERM
+    assert cleaned == ["closed"]
+
+
+def test_a_second_ctrl_c_cuts_the_clean_up() -> None:
+    cleaned: list[str] = []
+    stop = _stopped_twice(signal.SIGINT, cleaned)
+    assert stop.signum == signal.SIGINT
+    assert cleaned == []
+
+
+def test_sigterm_after_owns_the_signal_once_the_coroutine_is_done() -> None:
+    late: list[int] = []
+
+    def after(signum: int, _frame: Any) -> None:
+        late.append(signum)
+
+    async def command() -> str:
+        return "done"
+
+    assert run_until_signal(command(), sigterm_after=after) == "done"
+    assert signal.getsignal(signal.SIGTERM) is after  # not put back to the default by the loop
+    os.kill(os.getpid(), signal.SIGTERM)
+    assert late == [signal.SIGTERM]
