@@ -1,26 +1,18 @@
 """``run_until_signal``: the first SIGTERM or SIGINT cancels the command so its sessions
 close; a repeated SIGTERM does not cut that clean-up, a second Ctrl-C does; after the
-coroutine, ``sigterm_after`` owns SIGTERM. Real signals to this process."""
+coroutine, ``sigterm_after`` owns SIGTERM. Real signals to this process (tests/conftest.py
+puts the handlers back after each test)."""
 
 from __future__ import annotations
 
 import asyncio
 import os
 import signal
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
 
 from aeroweaver_edge.cli_runner import Stopped, run_until_signal
-
-
-@pytest.fixture(autouse=True)
-def _handlers_restored() -> Iterator[None]:
-    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
-    yield
-    for sig, handler in saved.items():
-        signal.signal(sig, handler)
 
 
 def _stopped_twice(signum: int, cleaned: list[str]) -> Stopped:
