@@ -19,7 +19,7 @@ import csv
 import json
 import math
 import statistics
-from collections.abc import Iterable, Sequence
+from collections.abc import Container, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -185,9 +185,10 @@ class CellStats:
         }
 
 
-def load_cells(out: Path) -> list[dict[str, Any]]:
-    """The complete cells. A cell written before a per-episode figure existed gets its
-    episodes recomputed from its trace (the source of every figure) when the trace is there."""
+def load_cells(out: Path, seeds: Container[int] | None = None) -> list[dict[str, Any]]:
+    """The complete cells (of ``seeds`` only, if given). A cell written before a per-episode
+    figure existed gets its episodes recomputed from its trace (the source of every figure)
+    when the trace is there."""
     cells = []
     for path in sorted((out / "runs").glob("*/*/seed*.json")):
         try:
@@ -195,6 +196,8 @@ def load_cells(out: Path) -> list[dict[str, Any]]:
         except (OSError, ValueError):
             continue
         if isinstance(data, dict) and data.get("bench", {}).get("complete"):
+            if seeds is not None and data["bench"].get("seed") not in seeds:
+                continue
             eps = data.get("episodes") or []
             trace = out / str(data["bench"].get("trace", ""))
             stale = any("central_reviews" not in e or "picks" not in e for e in eps)
@@ -641,8 +644,14 @@ def summary(
     }
 
 
-def write_report(out: Path, *, tasks: Sequence[str], conditions: Sequence[str]) -> None:
-    cells = load_cells(out)
+def write_report(
+    out: Path,
+    *,
+    tasks: Sequence[str],
+    conditions: Sequence[str],
+    seeds: Container[int] | None = None,
+) -> None:
+    cells = load_cells(out, seeds)
     rows = csv_rows(cells)
     with (out / "results.csv").open("w", newline="", encoding="utf-8") as f:
         w = csv.DictWriter(f, fieldnames=CSV_FIELDS)

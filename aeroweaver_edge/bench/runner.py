@@ -60,6 +60,7 @@ from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 RESULT_VERSION = 3
 OPTION_ORDER: Final = "seeded"
 DEFAULT_LLM_DEADLINE_S = 60.0
+DEFAULT_SEEDS = 3
 
 
 @dataclass(frozen=True)
@@ -522,8 +523,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="COND",
         help=f"default: all ({', '.join(CONDITIONS)})",
     )
-    p.add_argument("--seeds", type=int_in(1, 1000), default=3, help="seeds 1..N (default 3)")
-    p.add_argument("--first-seed", type=int_in(0), default=1, help="seeds start here")
+    p.add_argument(
+        "--seeds",
+        type=int_in(1, 1000),
+        default=None,
+        help="seeds 1..N (default 3; with --report-only: every finished seed unless given)",
+    )
+    p.add_argument(
+        "--first-seed", type=int_in(0), default=None, help="seeds start here (default 1)"
+    )
     p.add_argument(
         "--episodes",
         type=int_in(1, 1000),
@@ -585,8 +593,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     # A name given twice (or two spellings of one task) is one cell, one row, one column.
     args.tasks = list(dict.fromkeys(args.tasks or TASK_NAMES))
     args.conditions = list(dict.fromkeys(args.conditions or CONDITIONS))
+    # --report-only reports the seeds a run names, or every finished seed if none is named
+    report_seeds = None
+    if args.seeds is not None or args.first_seed is not None:
+        first = 1 if args.first_seed is None else args.first_seed
+        report_seeds = range(first, first + (args.seeds or DEFAULT_SEEDS))
+    if args.seeds is None:
+        args.seeds = 1 if args.quick else DEFAULT_SEEDS
+    if args.first_seed is None:
+        args.first_seed = 1
     if args.quick:
-        args.seeds = 1 if "--seeds" not in argv else args.seeds
         args.rounds = args.rounds or 2
     args.rounds = args.rounds or 24
     if args.llm:
@@ -600,7 +616,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     check_api_key_env(args.api_key_env)
     out = Path(args.out)
     if args.report_only:
-        return _report_only(out, args)
+        return _report_only(out, args, report_seeds)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {out} is not a directory", "give --out a directory")
     try:
@@ -623,9 +639,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     return asyncio.run(_cancellable(run_all(args, cells)))
 
 
-def _report_only(out: Path, args: argparse.Namespace) -> int:
+def _report_only(out: Path, args: argparse.Namespace, seeds: range | None) -> int:
     """Rebuild the report from finished cells; a directory without any is a mistyped
-    ``--out``, not an empty benchmark, so it is refused rather than given an empty table."""
+    ``--out``, not an empty benchmark, so it is refused rather than given an empty table.
+    Named seeds restrict it, so a run still adding seeds can publish a table in which every
+    condition has the same seeds."""
     from aeroweaver_edge.bench.report import load_cells, write_report
 
     if not out.is_dir():
@@ -638,9 +656,14 @@ def _report_only(out: Path, args: argparse.Namespace) -> int:
             f"--out {out} holds no finished cell (runs/TASK/CONDITION/seedN.json)",
             "run the benchmark into it first (the same command without --report-only)",
         )
+    if seeds is not None and not load_cells(out, seeds):
+        raise UserError(
+            f"--out {out} holds no finished cell of seeds {seeds.start}..{seeds.stop - 1}",
+            "name seeds the run has finished, or drop --seeds/--first-seed for all of them",
+        )
     if not os.access(out, os.W_OK):
         raise UserError(f"--out {out} is not writable", "give --out a writable directory")
-    write_report(out, tasks=args.tasks, conditions=args.conditions)
+    write_report(out, tasks=args.tasks, conditions=args.conditions, seeds=seeds)
     print(f"report written to {out / 'table.md'}", file=sys.stderr)
     return 0
 

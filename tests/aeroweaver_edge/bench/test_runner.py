@@ -356,3 +356,29 @@ def test_a_stopped_run_records_the_cells_it_finished_and_resumes(
     assert main(argv[3:]) == 0
     err = capsys.readouterr().err
     assert f"14 cells, {len(done)} already done, {14 - len(done)} to run" in err
+
+
+def test_report_only_with_seeds_reports_those_seeds_only(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run still adding seeds publishes a table where every condition has the same ones."""
+    out = tmp_path / "bench"
+    argv = ["bench", "--quick", "--tasks", "coverage", "--conditions", "scripted"]
+    assert main([*argv, "--seeds", "3", "--out", str(out)]) == 0
+
+    def seeds_in_csv() -> list[str]:
+        return [row.split(",")[2] for row in (out / "results.csv").read_text().splitlines()[1:]]
+
+    report = ["bench", "run", "--report-only", "--out", str(out)]
+    assert main([*report, "--seeds", "2"]) == 0
+    assert seeds_in_csv() == ["1", "2"]
+    assert "(n=2)" in (out / "table.md").read_text()
+    assert main([*report, "--first-seed", "2", "--seeds", "1"]) == 0
+    assert seeds_in_csv() == ["2"]
+    assert main(report) == 0  # no seed named: every finished seed
+    assert seeds_in_csv() == ["1", "2", "3"]
+    capsys.readouterr()
+    assert main([*report, "--first-seed", "7"]) == 2
+    err = capsys.readouterr().err
+    assert "no finished cell of seeds 7..9" in err
+    assert err.count("\n") == 1
