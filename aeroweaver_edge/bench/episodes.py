@@ -49,7 +49,7 @@ def _new(episode: int) -> dict[str, Any]:
         # HMAS-2: the UAVs' local reviews of the central plan, rounds that made the revision
         # call (only a disagreeing review buys one) and rounds where the revision changed the
         # plan for at least one UAV (0 of N: it chose as Centralized)
-        "central_reviews": {"asked": 0, "agreed": 0, "failed": 0},
+        "central_reviews": {"asked": 0, "agreed": 0, "disagreed": 0, "failed": 0},
         "central_revision_calls": 0,
         "central_revised_rounds": 0,
         "messages": {"sent": 0},
@@ -101,6 +101,10 @@ def episode_metrics(lines: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
                     e["central_reviews"]["asked"] += len(reviews)
                     e["central_reviews"]["agreed"] += sum(
                         bool(r.get("agree")) for r in reviews.values() if isinstance(r, dict)
+                    )
+                    # only these buy the revision call; the rest gave no usable answer
+                    e["central_reviews"]["disagreed"] += sum(
+                        r.get("agree") is False for r in reviews.values() if isinstance(r, dict)
                     )
                     # a review whose LLM call failed reads as "no feedback" to the planner
                     e["central_reviews"]["failed"] += sum(

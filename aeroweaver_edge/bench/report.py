@@ -69,6 +69,7 @@ class CellStats:
     central_rounds: int = 0
     reviews_asked: int = 0
     reviews_agreed: int = 0
+    reviews_disagreed: int = 0
     revised_rounds: int = 0
     revision_calls: int | None = 0  # None: some cell predates the count (result version 2)
     paired: dict[tuple[int, int], float] = field(default_factory=dict)  # (seed, ep) -> return
@@ -136,6 +137,7 @@ class CellStats:
         self.central_rounds += other.central_rounds
         self.reviews_asked += other.reviews_asked
         self.reviews_agreed += other.reviews_agreed
+        self.reviews_disagreed += other.reviews_disagreed
         self.revised_rounds += other.revised_rounds
         self.revision_calls = _add_known(self.revision_calls, other.revision_calls)
         self.per_round += other.per_round
@@ -180,9 +182,18 @@ class CellStats:
             "central_rounds": self.central_rounds,
             "reviews_agreed": self.reviews_agreed,
             "reviews_asked": self.reviews_asked,
+            "reviews_disagreed": self.reviews_disagreed,
             "revised_rounds": self.revised_rounds,
             "revision_calls": self.revision_calls,
         }
+
+
+def _predates_figures(episode: dict[str, Any]) -> bool:
+    """An episode summary written before one of today's figures existed."""
+    reviews = episode.get("central_reviews")
+    if reviews is None or "picks" not in episode:
+        return True
+    return bool(reviews.get("asked")) and "disagreed" not in reviews
 
 
 def load_cells(out: Path, seeds: Container[int] | None = None) -> list[dict[str, Any]]:
@@ -200,7 +211,7 @@ def load_cells(out: Path, seeds: Container[int] | None = None) -> list[dict[str,
                 continue
             eps = data.get("episodes") or []
             trace = out / str(data["bench"].get("trace", ""))
-            stale = any("central_reviews" not in e or "picks" not in e for e in eps)
+            stale = any(_predates_figures(e) for e in eps)
             if stale and trace.is_file():
                 with contextlib.suppress(OSError, ValueError):
                     data["episodes"] = episode_metrics(read_trace(trace))
@@ -247,6 +258,7 @@ def aggregate(cells: Iterable[dict[str, Any]]) -> dict[tuple[str, str], CellStat
             reviews = e.get("central_reviews", {})
             s.reviews_asked += int(reviews.get("asked", 0))
             s.reviews_agreed += int(reviews.get("agreed", 0))
+            s.reviews_disagreed += int(reviews.get("disagreed", 0))
             s.revised_rounds += int(e.get("central_revised_rounds", 0))
             calls = e.get("central_revision_calls")
             s.revision_calls = _add_known(s.revision_calls, None if calls is None else int(calls))
@@ -518,12 +530,21 @@ def markdown(
             "",
             "### HMAS-2: local reviews and central revisions",
             "",
-            "| task | episodes | reviews agreeing with the plan | rounds with a revision call "
-            "| rounds the revision changed |",
+            "A review that agrees or disagrees is feedback; one without a usable answer (the "
+            "call failed or gave no yes/no) is silence, and only a disagreement buys the "
+            "revision call.",
+            "",
+            "| task | episodes | reviews: agreed / disagreed / no usable answer "
+            "| rounds with a revision call | rounds the revision changed |",
             "|---|---|---|---|---|",
         ]
         for t, s in hmas2:
-            agree = f"{s.reviews_agreed} of {s.reviews_asked}" if s.reviews_asked else "–"
+            silent = s.reviews_asked - s.reviews_agreed - s.reviews_disagreed
+            agree = (
+                f"{s.reviews_agreed} / {s.reviews_disagreed} / {silent} of {s.reviews_asked}"
+                if s.reviews_asked
+                else "–"
+            )
             calls = s.revision_calls
             called = "–" if calls is None else f"{calls} of {s.central_rounds}"
             out.append(

@@ -85,7 +85,7 @@ def test_lost_reviews_make_the_cell_unusable_though_no_uav_held() -> None:
 
     end = {"type": "episode_end", "episode": 0, "team_return": -1.0, "reason": "horizon"}
     (ok,) = episode_metrics([rnd(0, 1), rnd(1, 0), rnd(2, 0), rnd(3, 0), end])
-    assert ok["central_reviews"] == {"asked": 12, "agreed": 11, "failed": 1}
+    assert ok["central_reviews"] == {"asked": 12, "agreed": 11, "disagreed": 0, "failed": 1}
     assert llm_failure_problem([ok]) is None
     (bad,) = episode_metrics([rnd(0, 3), rnd(1, 1), end])
     assert bad["central_reviews"]["failed"] == 4

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -59,7 +61,7 @@ def test_summary_per_task_pooled_per_condition_and_ratios() -> None:
 
 
 def central_round(
-    rnd: int, proposal: dict[str, str], final: dict[str, str], agree: list[bool]
+    rnd: int, proposal: dict[str, str], final: dict[str, str], agree: list[bool | None]
 ) -> dict[str, Any]:
     stages = ["plan", "revise"] if False in agree else ["plan"]  # the revision on disagreement
     return {
@@ -83,14 +85,15 @@ def test_hmas2_reviews_and_revisions_are_counted_and_tabled() -> None:
     from aeroweaver_edge.bench.report import markdown
 
     lines = [
-        central_round(0, {"uav0": "A", "uav1": "B"}, {"uav0": "A", "uav1": "B"}, [True, True]),
+        # a review without a usable yes/no is silence: it buys no revision
+        central_round(0, {"uav0": "A", "uav1": "B"}, {"uav0": "A", "uav1": "B"}, [True, None]),
         central_round(1, {"uav0": "A", "uav1": "B"}, {"uav0": "C", "uav1": "B"}, [False, True]),
         central_round(2, {"uav0": "A", "uav1": "A"}, {"uav0": "A", "uav1": "A"}, [False, False]),
         {"type": "round", "episode": 0, "round": 3, "decisions": {}, "central": {"calls": []}},
         {"type": "episode_end", "episode": 0, "team_return": -1.0, "reason": "horizon"},
     ]
     (ep,) = episode_metrics(lines)
-    assert ep["central_reviews"] == {"asked": 6, "agreed": 3, "failed": 0}
+    assert ep["central_reviews"] == {"asked": 6, "agreed": 2, "disagreed": 3, "failed": 0}
     assert ep["central_revised_rounds"] == 1  # round 1 only; round 3 had no reviews
     assert ep["central_revision_calls"] == 2  # rounds 1 and 2 had a disagreeing review
     assert ep["central_rounds"] == 4
@@ -102,10 +105,35 @@ def test_hmas2_reviews_and_revisions_are_counted_and_tabled() -> None:
         central_rounds=ep["central_rounds"],
     )
     table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
-    assert "| coverage | 1 | 3 of 6 | 2 of 4 | 1 of 4 |" in table
+    assert "| coverage | 1 | 2 / 3 / 1 of 6 | 2 of 4 | 1 of 4 |" in table
     del data["episodes"][0]["central_revision_calls"]  # a cell recorded before the count
     table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
-    assert "| coverage | 1 | 3 of 6 | – | 1 of 4 |" in table
+    assert "| coverage | 1 | 2 / 3 / 1 of 6 | – | 1 of 4 |" in table
+
+
+def test_an_hmas2_cell_written_before_the_disagreement_count_is_read_from_its_trace(
+    tmp_path: Path,
+) -> None:
+    """The archive's HMAS-2 cells predate ``disagreed``; the report recomputes their episodes
+    from the trace instead of reading a missing count as 0."""
+    import gzip
+
+    from aeroweaver_edge.bench.report import load_cells
+
+    lines = [
+        central_round(0, {"uav0": "A"}, {"uav0": "A"}, [False]),
+        {"type": "episode_end", "episode": 0, "team_return": -1.0, "reason": "horizon"},
+    ]
+    cell_dir = tmp_path / "runs" / "coverage" / "hmas2"
+    cell_dir.mkdir(parents=True)
+    with gzip.open(cell_dir / "seed1.trace.jsonl.gz", "wt", encoding="utf-8") as f:
+        f.writelines(json.dumps(line) + "\n" for line in lines)
+    data = cell("coverage", "hmas2", 1, [-1.0], 10)
+    data["bench"].update(complete=True, trace="runs/coverage/hmas2/seed1.trace.jsonl.gz")
+    data["episodes"][0]["central_reviews"] = {"asked": 1, "agreed": 0, "failed": 0}
+    (cell_dir / "seed1.json").write_text(json.dumps(data))
+    (loaded,) = load_cells(tmp_path)
+    assert loaded["episodes"][0]["central_reviews"]["disagreed"] == 1
 
 
 def test_paired_tests_position_bias_and_setup_tokens_in_the_table() -> None:
