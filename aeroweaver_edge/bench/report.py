@@ -291,6 +291,17 @@ def token_ratios(
     return ratios
 
 
+def paired_q(full: CellStats | None, ablation: CellStats | None, k_t: float) -> float | None:
+    """The paper's Q = 1 + (R_m - R_full) / K_t over the (seed, episode) pairs both ran: with
+    n = 10 for AeroWeaver and n = 5 for an ablation, unpaired means compare other worlds."""
+    if full is None or ablation is None:
+        return None
+    both = sorted(set(full.paired) & set(ablation.paired))
+    if not both:
+        return None
+    return 1 + statistics.fmean(ablation.paired[k] - full.paired[k] for k in both) / k_t
+
+
 def paired_tests(
     stats: dict[tuple[str, str], CellStats], tasks: Sequence[str], conditions: Sequence[str]
 ) -> dict[tuple[str, str], dict[str, Any]]:
@@ -478,7 +489,8 @@ def markdown(
     if "aeroweaver" in conds and ablations:
         out += [
             "",
-            "### Ablations as the paper's relative score Q = 1 + (R_m - R_full) / K_t",
+            "### Ablations as the paper's relative score Q = 1 + (R_m - R_full) / K_t "
+            "(on the episodes both ran)",
             "",
             "| task | " + " | ".join(CONDITIONS[c].title for c in ablations) + " |",
             "|---" * (len(ablations) + 1) + "|",
@@ -487,16 +499,8 @@ def markdown(
             full = stats.get((t, "aeroweaver"))
             row = []
             for c in ablations:
-                m = stats.get((t, c))
-                if full and m and full.returns and m.returns:
-                    q = (
-                        1
-                        + (statistics.fmean(m.returns) - statistics.fmean(full.returns))
-                        / PAPER_K[t]
-                    )
-                    row.append(f"{q:.3f}")
-                else:
-                    row.append("–")
+                q = paired_q(full, stats.get((t, c)), PAPER_K[t])
+                row.append("–" if q is None else f"{q:.3f}")
             out.append(f"| {t} | " + " | ".join(row) + " |")
     out += [
         "",
@@ -699,6 +703,7 @@ __all__ = [
     "csv_rows",
     "load_cells",
     "markdown",
+    "paired_q",
     "paired_tests",
     "summary",
     "token_ratios",

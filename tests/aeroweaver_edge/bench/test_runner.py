@@ -168,7 +168,9 @@ def test_tables_from_episode_figures() -> None:
     # mean [95 % bootstrap interval]: two episodes resample to means of -14, -12 or -10
     assert "| coverage | -12.00 [-14.00, -10.00] (n=2) | -20.00 (n=1) | -29.08 (n=1) |" in md
     assert "| coverage | 0.20 | – |" in md  # tokens 200 / 1000; no centralized cell
-    assert "| coverage | 0.000 |" in md  # Q = 1 + (-29.077 + 12) / 17.077 (the paper's K_t)
+    # Q on the episodes both ran (seed 1 only), with the paper's K_t: 1 + (-29.077 + 10) /
+    # 17.077; the unpaired means (AeroWeaver's over seeds 1 and 2) would give 0.000
+    assert "| coverage | -0.117 |" in md
 
 
 def test_an_endpoint_that_does_not_answer_is_refused_before_any_cell(
