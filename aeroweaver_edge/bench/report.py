@@ -291,6 +291,15 @@ def token_ratios(
     return ratios
 
 
+def _same_returns(a: CellStats, b: CellStats | None) -> str:
+    """In how many of the (seed, episode) pairs both ran the returns are equal: the same world,
+    so equal returns mean the same choices (HMAS-2 against Centralized)."""
+    both = sorted(set(a.paired) & set(b.paired)) if b is not None else []
+    if b is None or not both:
+        return "–"
+    return f"{sum(a.paired[k] == b.paired[k] for k in both)} of {len(both)} episodes"
+
+
 def paired_q(full: CellStats | None, ablation: CellStats | None, k_t: float) -> float | None:
     """The paper's Q = 1 + (R_m - R_full) / K_t over the (seed, episode) pairs both ran: with
     n = 10 for AeroWeaver and n = 5 for an ablation, unpaired means compare other worlds."""
@@ -539,10 +548,12 @@ def markdown(
             "revision call.",
             "",
             "| task | episodes | reviews: agreed / disagreed / no usable answer "
-            "| rounds with a revision call | rounds the revision changed |",
-            "|---|---|---|---|---|",
+            "| rounds with a revision call | rounds the revision changed "
+            "| same return as Centralized |",
+            "|---|---|---|---|---|---|",
         ]
         for t, s in hmas2:
+            twin = _same_returns(s, stats.get((t, "centralized")))
             silent = s.reviews_asked - s.reviews_agreed - s.reviews_disagreed
             agree = (
                 f"{s.reviews_agreed} / {s.reviews_disagreed} / {silent} of {s.reviews_asked}"
@@ -552,7 +563,8 @@ def markdown(
             calls = s.revision_calls
             called = "–" if calls is None else f"{calls} of {s.central_rounds}"
             out.append(
-                f"| {t} | {s.n} | {agree} | {called} | {s.revised_rounds} of {s.central_rounds} |"
+                f"| {t} | {s.n} | {agree} | {called} | {s.revised_rounds} of {s.central_rounds} "
+                f"| {twin} |"
             )
     bad = [(k, s.mismatches) for k, s in stats.items() if s.mismatches]
     if bad:

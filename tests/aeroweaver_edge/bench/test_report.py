@@ -105,7 +105,15 @@ def test_hmas2_reviews_and_revisions_are_counted_and_tabled() -> None:
         central_rounds=ep["central_rounds"],
     )
     table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
-    assert "| coverage | 1 | 2 / 3 / 1 of 6 | 2 of 4 | 1 of 4 |" in table
+    assert "| coverage | 1 | 2 / 3 / 1 of 6 | 2 of 4 | 1 of 4 | – |" in table
+    # Centralized in the same world: equal returns on seed 1, none on seed 2
+    twins = [cell("coverage", "centralized", 1, [-1.0], 10)]
+    twins += [
+        cell("coverage", "centralized", 2, [-3.0], 10),
+        cell("coverage", "hmas2", 2, [-2.0], 10),
+    ]
+    table = markdown(aggregate([data, *twins]), ["coverage"], ["centralized", "hmas2"])
+    assert "| 1 of 2 episodes |" in table
     del data["episodes"][0]["central_revision_calls"]  # a cell recorded before the count
     table = markdown(aggregate([data]), ["coverage"], ["hmas2"])
     assert "| coverage | 1 | 2 / 3 / 1 of 6 | – | 1 of 4 |" in table
