@@ -84,6 +84,13 @@ class CellStats:
     def n(self) -> int:
         return len(self.returns)
 
+    def paired_diffs(self, base: CellStats) -> list[float]:
+        """This condition's return minus ``base``'s on every (seed, episode) both ran: the same
+        world on both sides, so the difference is the conditions' and not the seeds'."""
+        return [
+            self.paired[k] - base.paired[k] for k in sorted(set(self.paired) & set(base.paired))
+        ]
+
     def mean(self, xs: Sequence[float]) -> float | None:
         return statistics.fmean(xs) if xs else None
 
@@ -294,10 +301,8 @@ def token_ratios(
 def _same_returns(a: CellStats, b: CellStats | None) -> str:
     """In how many of the (seed, episode) pairs both ran the returns are equal: the same world,
     so equal returns mean the same choices (HMAS-2 against Centralized)."""
-    both = sorted(set(a.paired) & set(b.paired)) if b is not None else []
-    if b is None or not both:
-        return "–"
-    return f"{sum(a.paired[k] == b.paired[k] for k in both)} of {len(both)} episodes"
+    diffs = a.paired_diffs(b) if b is not None else []
+    return f"{diffs.count(0.0)} of {len(diffs)} episodes" if diffs else "–"
 
 
 def paired_q(full: CellStats | None, ablation: CellStats | None, k_t: float) -> float | None:
@@ -305,10 +310,8 @@ def paired_q(full: CellStats | None, ablation: CellStats | None, k_t: float) -> 
     n = 10 for AeroWeaver and n = 5 for an ablation, unpaired means compare other worlds."""
     if full is None or ablation is None:
         return None
-    both = sorted(set(full.paired) & set(ablation.paired))
-    if not both:
-        return None
-    return 1 + statistics.fmean(ablation.paired[k] - full.paired[k] for k in both) / k_t
+    diffs = ablation.paired_diffs(full)
+    return 1 + statistics.fmean(diffs) / k_t if diffs else None
 
 
 def paired_tests(
@@ -333,8 +336,7 @@ def paired_tests(
             other = stats.get((t, c))
             if c == "aeroweaver" or other is None:
                 continue
-            keys = sorted(set(full.paired) & set(other.paired))
-            diffs = [other.paired[k] - full.paired[k] for k in keys]
+            diffs = other.paired_diffs(full)
             pooled.setdefault(c, []).extend(d / PAPER_K.get(t, 1.0) for d in diffs)
             found[(t, c)] = _test(diffs)
     for c in sorted({c for _, c in found}):

@@ -651,12 +651,13 @@ def _report_only(out: Path, args: argparse.Namespace, seeds: range | None) -> in
             f"--out {out} is not a benchmark directory: nothing to report",
             "give --out the directory a bench run wrote",
         )
-    if not load_cells(out):
+    cells = load_cells(out)
+    if not cells:
         raise UserError(
             f"--out {out} holds no finished cell (runs/TASK/CONDITION/seedN.json)",
             "run the benchmark into it first (the same command without --report-only)",
         )
-    if seeds is not None and not load_cells(out, seeds):
+    if seeds is not None and not any(c["bench"]["seed"] in seeds for c in cells):
         raise UserError(
             f"--out {out} holds no finished cell of seeds {seeds.start}..{seeds.stop - 1}",
             "name seeds the run has finished, or drop --seeds/--first-seed for all of them",
