@@ -54,6 +54,7 @@ from aeroweaver_edge.errors import RunFailed, UserError
 from aeroweaver_edge.json_out import write_json_file
 from aeroweaver_edge.llm.embedded import THREADS_ENV
 from aeroweaver_edge.llm.embedded import default_threads as embedded_threads
+from aeroweaver_edge.llm.peak import cpu_identity
 from aeroweaver_edge.tasks import TASK_NAMES, canonical_task
 
 # 2: seeded option order, compressed traces; 3: HMAS-2 revises only on disagreement
@@ -386,6 +387,7 @@ async def run_all(args: argparse.Namespace, cells: list[Cell]) -> int:
                 "physical_cores": physical_cores(),
                 "platform": platform.platform(),
                 "python": platform.python_version(),
+                "cpu": cpu_identity(),
             },
             "llm": source,
             "model": llm.model,

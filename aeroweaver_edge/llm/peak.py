@@ -92,6 +92,49 @@ def parse_cpuinfo(text: str) -> Peak:
     )
 
 
+KERNEL_FLAGS: tuple[str, ...] = (
+    "avx2",
+    "fma",
+    "f16c",
+    "avx512f",
+    "avx512bw",
+    "avx512_vnni",
+    "avx512_bf16",
+    "avx_vnni",
+    "amx_int8",
+)
+"""The features llama.cpp's CPU backend picks its kernels by (x86)."""
+
+
+def cpu_identity(path: Path = CPUINFO) -> dict[str, Any]:
+    """Vendor, family, model, stepping and kernel-selecting SIMD features of the first CPU.
+
+    Why: the same weights, prompt and thread count give first-token logprobs that differ by
+    up to ~0.5 nats between two CPUs whose llama.cpp kernel paths differ (docs/benchmark.md,
+    "Model, code, machine"), so a benchmark session records which CPU ran it. A KVM guest's
+    model name is often just "AMD EPYC"; family/model/stepping tell the generation.
+    """
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return {}
+    block = next((b for b in text.strip().split("\n\n") if "processor" in b), "")
+    fields: dict[str, str] = {}
+    for line in block.splitlines():
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip(), value.strip())
+    flags = set(fields.get("flags", "").split())
+    names = (("vendor_id", "vendor"), ("cpu family", "family"), ("model", "model"))
+    out: dict[str, Any] = {name: fields[key] for key, name in names if key in fields}
+    if "model name" in fields:
+        out["model_name"] = fields["model name"]
+    if "stepping" in fields:
+        out["stepping"] = fields["stepping"]
+    out["kernel_flags"] = [f for f in KERNEL_FLAGS if f in flags]
+    return out
+
+
 def cpu_peak(path: Path = CPUINFO) -> Peak:
     try:
         return parse_cpuinfo(path.read_text(encoding="utf-8", errors="replace"))

@@ -94,6 +94,7 @@ def test_quick_run_writes_cells_tables_and_resumes(
     assert manifest["sessions"][0]["load_start"]
     assert manifest["sessions"][0]["llm_threads"] is None
     assert manifest["sessions"][0]["jobs"] == 2
+    assert "kernel_flags" in manifest["sessions"][0]["machine"]["cpu"]  # which kernels ran
 
     # --report-only rebuilds every table and plot from the cells alone, byte for byte
     outputs = ["table.md", "results.csv", "summary.json", "returns.png", "tokens.png"]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.llm.peak import FMA_UNITS, cpu_peak, parse_cpuinfo
+from aeroweaver_edge.llm.peak import FMA_UNITS, cpu_identity, cpu_peak, parse_cpuinfo
 
 
 def _cpu(n: int, core: int, mhz: str, flags: str, physical: int = 0) -> str:
@@ -47,3 +47,25 @@ def test_this_machine() -> None:
     peak = cpu_peak()
     assert peak.physical_cores >= 1
     assert peak.as_dict()["fp32_gflops"] == round(peak.fp32_gflops(), 1)
+
+
+def test_cpu_identity_names_the_generation_and_the_kernel_features(tmp_path: Path) -> None:
+    info = tmp_path / "cpuinfo"
+    block = (
+        "processor\t: {n}\nvendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\n"
+        "model name\t: AMD EPYC\nstepping\t: 1\nflags\t\t: fpu sse2 avx fma avx2 avx512f "
+        "avx512bw avx512_vnni avx512_bf16\n"
+    )
+    info.write_text("\n".join(block.format(n=i) for i in (0, 1)))
+    ident = cpu_identity(info)
+    assert ident == {
+        "vendor": "AuthenticAMD",
+        "family": "25",
+        "model": "17",
+        "model_name": "AMD EPYC",
+        "stepping": "1",
+        "kernel_flags": ["avx2", "fma", "avx512f", "avx512bw", "avx512_vnni", "avx512_bf16"],
+    }
+    info.write_text(block.format(n=0).replace(" avx512f avx512bw avx512_vnni avx512_bf16", ""))
+    assert cpu_identity(info)["kernel_flags"] == ["avx2", "fma"]
+    assert cpu_identity(tmp_path / "missing") == {}
