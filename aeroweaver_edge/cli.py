@@ -36,7 +36,7 @@ from aeroweaver_edge.cli_checks import (
     mission_text,
 )
 from aeroweaver_edge.cli_errors import ArgumentParser, report
-from aeroweaver_edge.cli_runner import Stopped
+from aeroweaver_edge.cli_runner import Stopped, forget_early_stops, stop_before_loop
 from aeroweaver_edge.cli_runner import run_until_signal as _run
 from aeroweaver_edge.config import (
     MAX_UAVS,
@@ -184,17 +184,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
-def _stop_now(signum: int, _frame: object) -> None:
-    raise Stopped(signum)
-
-
 def cmd_daemon(args: argparse.Namespace) -> int:
     from aeroweaver_edge.run_dir import attach_to_run
 
     # A SIGTERM (the parent-death signal, systemctl stop) before the event loop handles
     # signals -- imports, config, sessions opening -- must still run the ``finally`` below,
     # or a run whose daemons were all still starting leaves its directory behind.
-    previous = signal.signal(signal.SIGTERM, _stop_now)
+    previous = signal.signal(signal.SIGTERM, stop_before_loop)
     member = None
     try:
         # Started by a simulated run: die with it, and the last one out removes its
@@ -206,6 +202,7 @@ def cmd_daemon(args: argparse.Namespace) -> int:
     finally:
         # The loop puts SIGTERM back to its default when it closes: ignore it while leaving.
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        forget_early_stops()
         if member is not None:
             member.leave()
         # The CLI process keeps ignoring SIGTERM to its very end (interpreter shutdown puts

@@ -23,6 +23,25 @@ class Stopped(Exception):
         self.signum = signum
 
 
+_early_stops: list[int] = []
+
+
+def stop_before_loop(signum: int, _frame: object) -> None:
+    """SIGTERM handler for before the event loop runs: raise ``Stopped``, and remember it.
+
+    Why remember: Python prints and drops an exception raised inside a weakref callback
+    (an import's module-lock callback, say) or ``__del__``, so a stop landing there would be
+    lost and the command would go on as if never signalled; ``run_until_signal`` honours a
+    remembered stop as soon as its loop handles signals."""
+    _early_stops.append(signum)
+    raise Stopped(signum)
+
+
+def forget_early_stops() -> None:
+    """The command ended: a remembered stop must not reach the next one in this process."""
+    _early_stops.clear()
+
+
 def run_until_signal(
     coro: Coroutine[Any, Any, T],
     on_signal: Callable[[int], None] | None = None,
@@ -55,6 +74,9 @@ def run_until_signal(
 
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, stop, sig)
+        if _early_stops:  # a stop that came before the loop and was swallowed on the way
+            stop(_early_stops[0])
+            _early_stops.clear()
         try:
             return await coro
         finally:

@@ -57,3 +57,38 @@ def test_sigterm_after_owns_the_signal_once_the_coroutine_is_done() -> None:
     assert signal.getsignal(signal.SIGTERM) is after  # not put back to the default by the loop
     os.kill(os.getpid(), signal.SIGTERM)
     assert late == [signal.SIGTERM]
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_stop_swallowed_before_the_loop_still_stops_the_command() -> None:
+    """A SIGTERM landing in a weakref callback (an import's module-lock callback) raises
+    ``Stopped`` where Python prints and drops it: the daemon went on flying. The stop is
+    remembered and the loop acts on it at once, closing what the command opened."""
+    import weakref
+
+    from aeroweaver_edge.cli_runner import forget_early_stops, stop_before_loop
+
+    class Held:
+        pass
+
+    held = Held()
+    ref = weakref.ref(held, lambda _ref: stop_before_loop(signal.SIGTERM, None))
+    del held  # the callback raises Stopped; Python reports it as unraisable and goes on
+    assert ref() is None
+    cleaned: list[str] = []
+
+    async def command() -> None:
+        try:
+            await asyncio.sleep(10)
+        finally:
+            cleaned.append("closed")
+
+    try:
+        with pytest.raises(Stopped) as info:
+            run_until_signal(command())
+    finally:
+        forget_early_stops()
+    assert info.value.signum == signal.SIGTERM
+    assert cleaned == ["closed"]
+    # remembered once: the next command runs to its end
+    assert run_until_signal(asyncio.sleep(0, result="done")) == "done"
