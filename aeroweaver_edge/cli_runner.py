@@ -15,8 +15,12 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 
-class Stopped(Exception):
-    """The operator stopped the command with a signal."""
+class Stopped(BaseException):
+    """The operator stopped the command with a signal.
+
+    A ``BaseException``, as ``KeyboardInterrupt`` is: a stop landing inside start-up code
+    that catches ``Exception`` (importing a skill package, reading a config) must end the
+    command, not be reported as that code's failure."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)

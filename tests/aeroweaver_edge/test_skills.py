@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import signal
 from pathlib import Path
 
 import pytest
 
 from aeroweaver_edge.actions import Hold, Intent, MoveTo
+from aeroweaver_edge.cli_runner import Stopped, forget_early_stops, stop_before_loop
 from aeroweaver_edge.observation import Observation, VehicleState
 from aeroweaver_edge.skill_api import SkillContext
 from aeroweaver_edge.skills import (
@@ -400,6 +402,25 @@ def test_one_broken_package_refuses_all_and_every_problem_is_reported(root: Path
     assert text.startswith(f"refusing skill packages under {root}")
     assert "skills/bad1/skill.md: front matter field 'extra'" in text
     assert "skills/bad2/skill.py: missing executor file" in text
+
+
+def test_a_stop_signalled_while_a_skill_is_imported_is_a_stop_not_a_broken_package(
+    root: Path,
+) -> None:
+    """``systemctl stop`` while a daemon imports its skills: the signal lands inside the
+    loader's ``exec_module``, which reports what an import raises as a broken package. The
+    daemon must stop (exit 0), not refuse its skills (exit 2)."""
+    write_pkg(
+        root, "signalled", py="import os, signal\n\nos.kill(os.getpid(), signal.SIGTERM)\nx = 1\n"
+    )
+    previous = signal.signal(signal.SIGTERM, stop_before_loop)
+    try:
+        with pytest.raises(Stopped) as info:
+            load_skills(root)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        forget_early_stops()
+    assert info.value.signum == signal.SIGTERM
 
 
 def test_broken_markdown_and_code_are_reported_together(root: Path) -> None:
