@@ -341,12 +341,9 @@ class UavDaemon:
         async for first in sub:
             view = self.mission.view()
             role = view.role if view is not None else None
-            touched = {
-                rec.episode
-                for key, rec in (first, *sub.drain())
-                if self.intake.offer(key, rec, role) and rec.run == self._run and rec.final
-            }
-            for episode in sorted(touched):
+            for key, rec in (first, *sub.drain()):
+                self.intake.offer(key, rec, role)
+            for episode in self.intake.grown(self._run):
                 self._tally(episode)
             if self.sharing is not None:
                 self.sharing.arrived.set()
@@ -357,7 +354,8 @@ class UavDaemon:
 
     def _tally(self, episode: int) -> None:
         """Report this daemon's shared-experience tally for ``episode`` (experience phase):
-        its own records published (-1: not yet) and same-role peers' records taken."""
+        its own records published (-1: not yet), peers' records received (any role, what
+        the barrier checks) and of those, same-role ones taken."""
         view, ctx = self.mission.view(), self.mission.context
         self.mesh.put(
             self.keys.report(self.uav),
@@ -368,6 +366,7 @@ class UavDaemon:
                 invocation="", label=None, held=True,
                 experience_shared=self._shared.get(episode, -1),
                 experience_taken=self.intake.taken(self._run, episode),
+                experience_received=self.intake.received(self._run, episode),
             ),
             block=True,
         )  # fmt: skip

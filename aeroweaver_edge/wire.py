@@ -158,7 +158,8 @@ class ProgressReport(msgspec.Struct, frozen=True, kw_only=True, tag="report"):
     rejected: Causes = {}  # cumulative: everything this daemon refused, by cause
     missing_messages: int = 0  # cumulative: expected messages that never came
     experience_shared: int = 0  # experience phase: own records of ``episode`` published
-    experience_taken: int = 0  # experience phase: peers' records of ``episode`` taken
+    experience_taken: int = 0  # experience phase: same-role peers' records of ``episode`` taken
+    experience_received: int = 0  # experience phase: peers' final records of it received, any role
     vehicle: VehicleStatus | None = None  # round phase: the vehicle link's view (field)
 
 

@@ -6,8 +6,12 @@ in-process swarm and with one process per daemon, and from one run to the next. 
 is *taken* here when it arrives (checked, deduplicated, counted per run and episode) and
 *stored* at the start of the daemon's next round, all pending records at once in one
 canonical order (run, episode, uav, round). With the orchestration's barrier between
-episodes (``orchestration/barrier.py``, which waits for the taken counts) every run of a
-seed stores the same memory in the same order, whatever the process layout.
+episodes (``orchestration/barrier.py``) every run of a seed stores the same memory in the
+same order, whatever the process layout. The barrier waits for the *received* counts:
+every peer's finalised record, whatever its role. A UAV reassigned mid-episode publishes
+records of two roles and its peers take those of their current role only, so counts of
+taken records cannot be checked against what was published without knowing every role
+at every arrival; that every record arrived can, and implies every same-role one was taken.
 
 Shared per round (``[agent] share_every = "round"``), a daemon also publishes each record as
 it happens, with its round's reward; the world tells each UAV which same-role peers publish
@@ -58,6 +62,9 @@ class SharedIntake:
         self._per_sender: dict[str, int] = {}  # pending records by sender
         self._taken: OrderedDict[tuple[str, int], set[RecordKey]] = OrderedDict()
         self._arrived: OrderedDict[RecordKey, None] = OrderedDict()  # authentic, any role
+        # authentic finalised peers' records per (run, episode), any role: the barrier's count
+        self._received: OrderedDict[tuple[str, int], set[RecordKey]] = OrderedDict()
+        self._grown: set[tuple[str, int]] = set()  # received counts grown since ``grown``
         self._fetched: set[RecordKey] = set()  # pending records fetched from a queryable
         self.refused = 0  # not a peer's own record on its own key, or over the bound
         self.stored = 0
@@ -75,7 +82,9 @@ class SharedIntake:
             self.refused += 1  # a UAV shares only its own experience, on its own key
             return False
         k: RecordKey = (rec.run, rec.uav, rec.episode, rec.round)
-        if not rec.final and not fetched:
+        if rec.final:
+            self._receive(k)
+        elif not fetched:
             self._arrived[k] = None
             self._arrived.move_to_end(k)
             while len(self._arrived) > MAX_TAKEN:
@@ -107,6 +116,27 @@ class SharedIntake:
         if len(seen) < MAX_TAKEN:
             seen.add(k)
         return True
+
+    def _receive(self, k: RecordKey) -> None:
+        tally = (k[0], k[2])
+        seen = self._received.setdefault(tally, set())
+        self._received.move_to_end(tally)
+        while len(self._received) > MAX_EPISODES:
+            self._grown.discard(self._received.popitem(last=False)[0])
+        if k not in seen and len(seen) < MAX_TAKEN:
+            seen.add(k)
+            self._grown.add(tally)
+
+    def received(self, run: str, episode: int) -> int:
+        """Distinct peers' finalised records of ``run``'s ``episode`` received, any role."""
+        return len(self._received.get((run, episode), ()))
+
+    def grown(self, run: str) -> list[int]:
+        """The episodes of ``run`` whose received count grew since the last call (their
+        tally is due); forgets the rest."""
+        episodes = sorted(e for r, e in self._grown if r == run)
+        self._grown.clear()
+        return episodes
 
     def arrived(self, run: str, uav: str, episode: int, round: int) -> bool:
         """Whether ``uav``'s in-flight record of that round has arrived (whatever its role)."""

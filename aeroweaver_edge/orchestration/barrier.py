@@ -2,18 +2,22 @@
 
 At an episode's end every daemon finalises its records of that episode and publishes them
 for its same-role peers (DESIGN §5), then reports a tally (``ProgressReport`` phase
-``experience``: own records published, peers' records taken). Before the world starts the
-next episode, the orchestration waits here until
+``experience``: own records published, peers' records received and, of those, taken).
+Before the world starts the next episode, the orchestration waits here until
 
 - every *sharer* (a daemon that played the episode's last round) still in that life has
   reported how many records it published, and
-- every such daemon has taken all records its same-role peers reported publishing.
+- every such daemon has received every record the other sharers reported publishing.
 
 Then every daemon stores exactly the same peers' records before its next decision, in one
 order (``SharedIntake``), so returns do not depend on process layout or timing: a fixed
-sleep could not promise that. The wait is bounded; a daemon that died (its token went) or
-restarted (its reports carry a new boot epoch) during the wait is no longer waited for,
-and a timeout is counted and logged, never fatal.
+sleep could not promise that. Received, not taken, and whatever the role: a UAV reassigned
+mid-episode publishes records of two roles, and its peers take only those of their own
+role at arrival; every record received implies every same-role one was taken.
+
+The wait is bounded; a daemon that died (its token went) or restarted (its reports carry a
+new boot epoch) during the wait is no longer waited for, and a timeout is counted and
+logged, never fatal.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from aeroweaver_edge.wire import ProgressReport
@@ -38,7 +42,7 @@ class BarrierStats:
     episodes: int = 0
     confirmed: int = 0
     timeouts: int = 0
-    records: int = 0  # peers' records confirmed taken, summed over daemons and episodes
+    records: int = 0  # same-role peers' records confirmed taken, summed over daemons, episodes
     wait_s: list[float] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)  # what each timeout still lacked
 
@@ -58,8 +62,7 @@ class ExperienceBarrier:
     """Fed every accepted progress report (``Commander.report_listeners``); ``wait`` blocks
     until an episode's shared experience is confirmed taken, or the bound passes."""
 
-    def __init__(self, roles: Mapping[str, str], timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
-        self.roles = dict(roles)
+    def __init__(self, timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
         self.timeout_s = timeout_s
         self.stats = BarrierStats()
         self._epoch: dict[str, int] = {}  # uav -> boot epoch of its latest report
@@ -96,13 +99,11 @@ class ExperienceBarrier:
             elif u in live:
                 missing.append(f"{u} has not shared")
         for u, epoch in sorted(live.items()):
-            expected = sum(
-                n for v, n in published.items() if v != u and self.roles.get(v) == self.roles.get(u)
-            )
+            expected = sum(n for v, n in published.items() if v != u)
             rep = self._tally.get((u, episode))
-            taken = rep.experience_taken if rep is not None and rep.h.epoch == epoch else 0
-            if taken < expected:
-                missing.append(f"{u} took {taken} of {expected}")
+            got = rep.experience_received if rep is not None and rep.h.epoch == epoch else 0
+            if got < expected:
+                missing.append(f"{u} received {got} of {expected}")
         return missing
 
     def _confirmed_records(self, episode: int, sharers: Iterable[str]) -> int:

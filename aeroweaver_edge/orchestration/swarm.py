@@ -499,7 +499,7 @@ async def run_swarm(
             on_commander(commander)
         if on_started is not None:  # observers join before the first round
             await on_started(SwarmHandle(opts.swarm, commander, net.config))
-        barrier = ExperienceBarrier(task.roles(), max(BARRIER_TIMEOUT_S, 2 * opts.deadline_s))
+        barrier = ExperienceBarrier(max(BARRIER_TIMEOUT_S, 2 * opts.deadline_s))
         commander.report_listeners.append(barrier.on_report)
 
         pin_slots = source == "embedded" if opts.slots is None else opts.slots

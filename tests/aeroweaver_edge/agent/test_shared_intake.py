@@ -7,7 +7,7 @@ import random
 from pathlib import Path
 
 from aeroweaver_edge.agent.memory import AsyncExperienceMemory, ExperienceMemory
-from aeroweaver_edge.agent.shared_intake import SharedIntake
+from aeroweaver_edge.agent.shared_intake import MAX_EPISODES, SharedIntake
 from aeroweaver_edge.wire import ExperienceRecord, Header, Keys
 
 KEYS = Keys("si")
@@ -42,6 +42,28 @@ def test_only_same_role_peers_own_records_on_their_own_key_are_taken() -> None:
     assert intake.pending == 1
 
 
+def test_every_peers_final_record_is_received_whatever_its_role() -> None:
+    """The barrier's count: a reassigned peer's records of its old role are not taken but
+    are received, so the barrier can tell that nothing it waits for is still on the way."""
+    intake = SharedIntake("uav0")
+    intake.offer(*rec("uav1", 0, 0, role="leader"), "searcher")
+    intake.offer(*rec("uav1", 0, 1), "searcher")
+    intake.offer(*rec("uav1", 0, 1, seq=2), "searcher")  # a newer version: the same record
+    intake.offer(*rec("uav1", 0, 2, final=False), "searcher")  # in flight: not yet
+    intake.offer(*rec("uav2", 0, 0, role="leader"), None)  # no mission yet: still received
+    intake.offer(*rec("uav0", 0, 0), "searcher")  # our own echo: not a peer's
+    key, forged = rec("uav1", 0, 3, sender="uav2")
+    intake.offer(key, forged, "searcher")  # not authentic: not received
+    assert (intake.received(RUN, 0), intake.taken(RUN, 0)) == (3, 1)
+    assert intake.grown(RUN) == [0]
+    assert intake.grown(RUN) == []  # reported: nothing new since
+    intake.offer(*rec("uav1", 0, 1, seq=3), "searcher")
+    assert intake.grown(RUN) == []  # a version of a record already received
+    intake.offer(*rec("uav2", 1, 0), "searcher")
+    intake.offer(*rec("uav2", 0, 0, run="other"), "searcher")
+    assert intake.grown(RUN) == [1]
+
+
 def test_counts_distinct_records_per_run_and_episode_newer_versions_replace() -> None:
     intake = SharedIntake("uav0")
     assert intake.offer(*rec("uav1", 0, 0, final=False, seq=1), "searcher")
@@ -61,6 +83,14 @@ def test_a_flood_is_bounded() -> None:
     assert taken == [True, True, True, False, False]
     assert intake.refused == 2
     assert intake.pending == 3
+
+
+def test_received_tallies_are_bounded_under_a_flood_of_episodes() -> None:
+    intake = SharedIntake("uav0")
+    for episode in range(3 * MAX_EPISODES):
+        intake.offer(*rec("uav1", episode, 0, role="leader"), "searcher")
+    assert intake.grown(RUN) == list(range(2 * MAX_EPISODES, 3 * MAX_EPISODES))
+    assert intake.received(RUN, 0) == 0  # forgotten, oldest first
 
 
 async def test_storage_order_is_canonical_whatever_the_arrival_order(tmp_path: Path) -> None:
