@@ -95,7 +95,7 @@ function growFit(f) {
   for (const b of f.bodies || []) m = Math.max(m, Math.abs(b.pos[0]), Math.abs(b.pos[1]));
   for (const e of f.entities || []) m = Math.max(m, Math.abs(e.pos[0]), Math.abs(e.pos[1]));
   const want = Math.max(20, Math.ceil((m * 1.25) / 10) * 10);
-  if (want > S.fitHalf) S.fitHalf = want;
+  if (want > S.fitHalf) { S.fitHalf = want; S.dirtyMap = true; } // a shown frame rescales too
 }
 
 function view(canvas) {
@@ -271,6 +271,7 @@ function drawMap(now) {
   const covered = new Set(taskStatus(f).filter((r) => r.covered.length).map((r) => r.id));
   for (const e of f.entities || []) drawEntity(ctx, v, e, covered.has(e.id));
   const alpha = S.anim ? Math.max(0, Math.min(1, (now - S.anim.t0) / S.anim.ms)) : 1;
+  if (S.anim && alpha >= 1) S.anim.done = true; // the motion's last draw is at the frame itself
   const pos = {};
   for (const b of f.bodies || []) {
     const from = S.anim && S.anim.from && S.anim.from[b.id];
@@ -431,7 +432,9 @@ function tick(now) {
   // the motion between two frames, fading messages, or a resize (an idle page costs nothing)
   const map = $("map");
   const size = `${map.clientWidth}x${map.clientHeight}`;
-  const animating = S.anim && now - S.anim.t0 < S.anim.ms + 20;
+  // until one draw at the frame's own positions, however late the animation frames come
+  // (a busy or throttled page); bounded, so a frame gone meanwhile does not redraw forever
+  const animating = S.anim && !S.anim.done && now - S.anim.t0 < S.anim.ms + 2000;
   if (S.dirtyMap || animating || S.msgs.length || size !== S.mapSize) {
     S.dirtyMap = false; S.mapSize = size;
     drawMap(now);

@@ -54,6 +54,20 @@ def overlaps(a: dict[str, float], b: dict[str, float]) -> bool:
 
 
 LABELS = "window.__aw.labels.map(l => ({id: l.id, x: l.x, y: l.y, w: l.w, h: l.h}))"
+# Read once the page has settled: every frame loaded, the replay's scale applied, the motion
+# into the shown frame drawn to its end, and the map drawn at the canvas's current size with
+# the same labels for 10 polls in a row (the side panel and legend fill in after the first
+# draw and can resize the canvas). Read earlier, the labels are of a partial layout.
+SETTLED = """(want) => {
+  const s = window.__aw, c = document.getElementById("map");
+  const size = `${c.clientWidth}x${c.clientHeight}`;
+  const ready = s.frames.length === 3 && s.meta.mode === "replay" && s.labels.length === want
+    && (!s.anim || s.anim.done) && !s.dirtyMap && s.mapSize === size;
+  const key = ready ? JSON.stringify([s.cur, s.mapSize, s.labels]) : "";
+  window.__settled = key && key === (window.__settled || {}).key
+    ? { key, polls: window.__settled.polls + 1 } : { key, polls: 0 };
+  return window.__settled.polls >= 10;
+}"""
 
 
 @pytest.mark.parametrize("n", [6, 20])
@@ -76,7 +90,7 @@ async def test_labels_never_overlap(tmp_path: Path, n: int) -> None:
             for _ in range(2):  # the same frame, drawn twice from scratch: the same places
                 await page.goto(console.url)
                 want = n + len(LANDMARKS)
-                await page.wait_for_function(f"window.__aw.labels.length === {want}")
+                await page.wait_for_function(SETTLED, arg=want)
                 labels = await page.evaluate(LABELS)
                 placements.append(labels)
             assert placements[0] == placements[1]
