@@ -60,7 +60,7 @@ class BarrierStats:
 
 class ExperienceBarrier:
     """Fed every accepted progress report (``Commander.report_listeners``); ``wait`` blocks
-    until an episode's shared experience is confirmed taken, or the bound passes."""
+    until an episode's shared experience is confirmed received, or the bound passes."""
 
     def __init__(self, timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
         self.timeout_s = timeout_s
