@@ -46,6 +46,23 @@ def _version(rec: ExperienceRecord) -> tuple[bool, int, int]:
     return rec.final, rec.h.epoch, rec.h.seq
 
 
+Tallies = OrderedDict[tuple[str, int], set[RecordKey]]  # (run, episode) -> records counted
+
+
+def _count(tallies: Tallies, k: RecordKey) -> bool:
+    """Count ``k`` in its (run, episode) tally, forgetting the oldest tallies past
+    ``MAX_EPISODES``; whether it is new there."""
+    tally = (k[0], k[2])
+    seen = tallies.setdefault(tally, set())
+    tallies.move_to_end(tally)
+    while len(tallies) > MAX_EPISODES:
+        tallies.popitem(last=False)
+    if k in seen or len(seen) >= MAX_TAKEN:
+        return False
+    seen.add(k)
+    return True
+
+
 class SharedIntake:
     """Takes same-role peers' records as they arrive; stores them in canonical order."""
 
@@ -60,10 +77,10 @@ class SharedIntake:
         self.max_per_sender = max_per_sender
         self._pending: dict[RecordKey, ExperienceRecord] = {}
         self._per_sender: dict[str, int] = {}  # pending records by sender
-        self._taken: OrderedDict[tuple[str, int], set[RecordKey]] = OrderedDict()
+        self._taken: Tallies = OrderedDict()
         self._arrived: OrderedDict[RecordKey, None] = OrderedDict()  # authentic, any role
         # authentic finalised peers' records per (run, episode), any role: the barrier's count
-        self._received: OrderedDict[tuple[str, int], set[RecordKey]] = OrderedDict()
+        self._received: Tallies = OrderedDict()
         self._grown: set[tuple[str, int]] = set()  # received counts grown since ``grown``
         self._fetched: set[RecordKey] = set()  # pending records fetched from a queryable
         self.refused = 0  # not a peer's own record on its own key, or over the bound
@@ -109,23 +126,14 @@ class SharedIntake:
             self._fetched.discard(k)
         if not rec.final:
             return True  # counted by the barrier once its finalised version comes
-        seen = self._taken.setdefault((rec.run, rec.episode), set())
-        self._taken.move_to_end((rec.run, rec.episode))
-        while len(self._taken) > MAX_EPISODES:
-            self._taken.popitem(last=False)
-        if len(seen) < MAX_TAKEN:
-            seen.add(k)
+        _count(self._taken, k)
         return True
 
     def _receive(self, k: RecordKey) -> None:
-        tally = (k[0], k[2])
-        seen = self._received.setdefault(tally, set())
-        self._received.move_to_end(tally)
-        while len(self._received) > MAX_EPISODES:
-            self._grown.discard(self._received.popitem(last=False)[0])
-        if k not in seen and len(seen) < MAX_TAKEN:
-            seen.add(k)
-            self._grown.add(tally)
+        if _count(self._received, k):
+            self._grown.add((k[0], k[2]))
+            if len(self._grown) > MAX_EPISODES:  # only tallies still kept can be due
+                self._grown.intersection_update(self._received)
 
     def received(self, run: str, episode: int) -> int:
         """Distinct peers' finalised records of ``run``'s ``episode`` received, any role."""
@@ -134,7 +142,7 @@ class SharedIntake:
     def grown(self, run: str) -> list[int]:
         """The episodes of ``run`` whose received count grew since the last call (their
         tally is due); forgets the rest."""
-        episodes = sorted(e for r, e in self._grown if r == run)
+        episodes = sorted(e for r, e in self._grown if r == run and (r, e) in self._received)
         self._grown.clear()
         return episodes
 
