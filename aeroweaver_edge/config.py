@@ -26,9 +26,10 @@ from pydantic import (
     model_validator,
 )
 
-from aeroweaver_edge import defaults as d
-from aeroweaver_edge.endpoints import endpoint_problem
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts import defaults as d
+from aeroweaver_edge.contracts.endpoints import UdpUrl, endpoint_problem
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.contracts.selector_specs import EstimatorSpec, ScriptedBaseSpec
 
 _ID_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_-")
 _RUN_CHARS = _ID_CHARS | set("ABCDEFGHIJKLMNOPQRSTUVWXYZ.:")
@@ -128,7 +129,7 @@ _PROTECTED_OVERRIDES = ("transport/link/tls", "access_control", "transport/auth"
 
 
 class MeshConfig(_Section):
-    """Zenoh session settings; defaults suit a loopback CI mesh (see notes/zenoh.md)."""
+    """Zenoh session settings; defaults suit a loopback CI mesh (see docs/notes/zenoh.md)."""
 
     mode: Literal["peer", "client", "router"] = "peer"
     listen: list[str] = Field(default_factory=lambda: ["tcp/127.0.0.1:0"])
@@ -211,7 +212,7 @@ class AgentConfig(_Section):
     """The selector and its experience memory (paper defaults)."""
 
     # llm: this UAV's own LLM; scripted: the task's reference policy; centralized / hmas2:
-    # a baseline's central node decides (aeroweaver_edge.baselines), the UAV still executes.
+    # a baseline's central node decides (aeroweaver_lab.baselines), the UAV still executes.
     selector: Literal["llm", "scripted", "centralized", "hmas2"] = "llm"
     beta: Finite = Field(default=d.BETA, ge=0, le=MAX_BETA)
     gamma: Finite = Field(default=d.GAMMA, ge=0, le=1)
@@ -253,16 +254,12 @@ class AgentConfig(_Section):
     @field_validator("estimator")
     @classmethod
     def _estimator(cls, value: str) -> str:
-        from aeroweaver_edge.agent.estimators import Estimator
-
-        return Estimator.parse(value).name  # ValueError: one line with the allowed forms
+        return EstimatorSpec.parse(value).name  # ValueError: one line with the allowed forms
 
     @field_validator("scripted_base")
     @classmethod
     def _scripted_base(cls, value: str) -> str:
-        from aeroweaver_edge.agent.scripted import Base
-
-        return Base.parse(value).name
+        return ScriptedBaseSpec.parse(value).name
 
     @field_validator("run_id")
     @classmethod
@@ -348,8 +345,6 @@ class VehicleConfig(_Section):
                 f"url is required for backend {self.backend!r}, e.g. udpin://0.0.0.0:14540"
             )
         if self.backend == "mavlink":
-            from aeroweaver_edge.vehicle.mavlink.udp import UdpUrl
-
             UdpUrl.parse(self.url)
         elif "://" not in self.url:
             raise ValueError(f"url {self.url!r} is not a MAVSDK connection URL (scheme://...)")
@@ -359,8 +354,8 @@ class VehicleConfig(_Section):
 
 
 class ApprovalConfig(_Section):
-    """``[approval]``: operator approval for vehicle actions (``aeroweaver_edge.approval``).
-    normal: take-off needs one approval per mission, land and return none (notes/safety.md);
+    """``[approval]``: operator approval for vehicle actions (``aeroweaver_edge.safety.approval``).
+    normal: take-off needs one approval per mission, land and return none (docs/notes/safety.md);
     strict: every take-off (the mission launch too), landing and return needs its own."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
@@ -454,9 +449,15 @@ class ConfigError(UserError):
     (when there is a better one than "correct that setting") says what to do."""
 
     def __init__(self, message: str, fix: str = "") -> None:
-        ValueError.__init__(self, message)  # str(): the message alone; cli_errors adds the fix
+        ValueError.__init__(self, message)  # str(): the message alone; explain adds the fix
         self.cause = message
         self.fix = fix
+
+    def explain(self) -> tuple[int, str]:
+        fix = (
+            self.fix or "correct that setting (keys: configs/uav.toml; bounds: docs/reliability.md)"
+        )
+        return 2, f"config error: {self}; {fix}"
 
 
 M = TypeVar("M", bound=BaseModel)

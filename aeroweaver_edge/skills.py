@@ -38,9 +38,9 @@ from pydantic import (
     field_validator,
 )
 
-from aeroweaver_edge.actions import Intent
-from aeroweaver_edge.observation import Observation
-from aeroweaver_edge.skill_api import SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import Intent
+from aeroweaver_edge.contracts.observation import Observation
+from aeroweaver_edge.contracts.skill_api import SkillContext, SkillParams
 
 DOC_FILE = "skill.md"
 DEFAULT_EXECUTOR = "skill.py"
@@ -87,6 +87,14 @@ class SkillError(Exception):
         if not self.header and len(lines) == 1:
             return lines[0]
         return "\n  ".join([self.header or "skill problems:", *lines])
+
+    def explain(self) -> tuple[int, str]:
+        first = str(self.problems[0]) if self.problems else str(self)
+        more = f" (and {len(self.problems) - 1} more problems)" if len(self.problems) > 1 else ""
+        return 2, (
+            f"broken skill package: {first}{more}; fix that file, or point "
+            "AEROWEAVER_SKILLS_DIR at a valid skills directory"
+        )
 
 
 class SkillParamError(ValueError):
@@ -407,7 +415,7 @@ def _check_params(module: ModuleType, path: Path, problem: Problem) -> type[Skil
         problem(path, "missing class 'Params'")
         return None
     if not (isinstance(params, type) and issubclass(params, SkillParams)):
-        problem(path, "Params must subclass SkillParams (aeroweaver_edge.skill_api)")
+        problem(path, "Params must subclass SkillParams (aeroweaver_edge.contracts.skill_api)")
         return None
     cfg = params.model_config
     if cfg.get("extra") != "forbid" or cfg.get("allow_inf_nan") is not False:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Mapping, Sequence
 
-from aeroweaver_edge.defaults import CATALOGUE_SIZE, HOLD_SKILL, TOP_K
+from aeroweaver_edge.contracts.defaults import CATALOGUE_SIZE, HOLD_SKILL, TOP_K
 from aeroweaver_edge.skills import SkillRegistry
 from aeroweaver_edge.tasks import get_spec
 from commander.retrieval import BM25Retriever

@@ -15,8 +15,7 @@ import functools
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.wire import (
     Assignment,
     HeaderFactory,
     Keys,
@@ -24,12 +23,13 @@ from aeroweaver_edge.wire import (
     OperatorCommand,
     ProgressReport,
 )
+from aeroweaver_edge.runtime.lifecycle import cancel_all
 from commander.activation import HOLD
 from commander.plan import MissionPlan, UavAssignment
 from commander.progress import ProgressBoard
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh, Subscription
+    from aeroweaver_edge.mesh.session import Mesh, Subscription
 
 
 OPERATOR = "operator"

@@ -24,7 +24,7 @@ import hashlib
 from collections.abc import Sequence
 
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.defaults import ARENA_HALF_M, MIN_SEPARATION_M
+from aeroweaver_edge.contracts.defaults import ARENA_HALF_M, MIN_SEPARATION_M
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.skills import SkillRegistry, load_skills
 from aeroweaver_edge.tasks import get_spec

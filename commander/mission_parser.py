@@ -26,8 +26,8 @@ from typing import Any, Literal
 
 from pydantic import ValidationError
 
-from aeroweaver_edge.defaults import ARENA_HALF_M
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.defaults import ARENA_HALF_M
+from aeroweaver_edge.contracts.errors import UserError
 from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError, LLMHTTPError
 from aeroweaver_edge.tasks import get_spec, specs
 from commander.mission_text import check_mission_text
@@ -40,6 +40,9 @@ ParseSource = Literal["llm", "fallback"]
 
 class MissionParseError(UserError):
     """Neither the LLM nor the rules produced a valid task record; the message says why."""
+
+    def explain(self) -> tuple[int, str]:
+        return 2, f"cannot understand the mission: {self}"
 
 
 # --------------------------------------------------------------------------- JSON over chat

@@ -12,12 +12,12 @@ import asyncio
 import contextlib
 from typing import TYPE_CHECKING, Any
 
-from aeroweaver_edge.wire import Keys, last_chunk
+from aeroweaver_edge.contracts.wire import Keys, last_chunk
 from commander.commander import Commander
 from commander.progress import UavProgress
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.mesh.session import Mesh
 
 
 async def discover_roster(mesh: Mesh, swarm: str, wait_s: float) -> list[str]:

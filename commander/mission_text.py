@@ -14,7 +14,7 @@ from __future__ import annotations
 import unicodedata
 from typing import Final
 
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
 
 MAX_MISSION_BYTES: Final = 8 * 1024
 _ALLOWED_CONTROLS = frozenset("\t\n\r")

@@ -6,8 +6,8 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
-from aeroweaver_edge.hold_reasons import count_causes
-from aeroweaver_edge.wire import ProgressReport
+from aeroweaver_edge.contracts.hold_reasons import count_causes
+from aeroweaver_edge.contracts.wire import ProgressReport
 
 
 @dataclass

@@ -4,7 +4,7 @@ One LLM call proposes ``{"assignments": [{"uav", "role", "local_goal"}]}``; the 
 accepted only if it is a complete, well-formed answer for *this* task: every participating UAV
 exactly once and nobody else, role names from the task's own roles, and counts that match the
 mission's stated counts and the task's bounds (one speaker, one leader, ...). Anything else
-falls back to the per-task template (notes/mpe-tasks.md "Default roles"), and the reason is
+falls back to the per-task template (docs/notes/mpe-tasks.md "Default roles"), and the reason is
 recorded. The template is also what runs without a client.
 """
 

@@ -27,7 +27,7 @@ from pydantic import (
     model_validator,
 )
 
-from aeroweaver_edge.defaults import ARENA_HALF_M, MAX_UAVS
+from aeroweaver_edge.contracts.defaults import ARENA_HALF_M, MAX_UAVS
 from aeroweaver_edge.tasks import TASK_NAMES, get_spec
 from aeroweaver_edge.tasks.spec import RoleSpec, TaskSpec
 

@@ -20,10 +20,10 @@ from __future__ import annotations
 import math
 from collections.abc import Collection
 
-from aeroweaver_edge.actions import Intent, MoveTo, Outgoing
-from aeroweaver_edge.observation import Observation
-from aeroweaver_edge.skill_api import SkillContext
-from aeroweaver_edge.wire import Entity, InboxMessage
+from aeroweaver_edge.contracts.actions import Intent, MoveTo, Outgoing
+from aeroweaver_edge.contracts.observation import Observation
+from aeroweaver_edge.contracts.skill_api import SkillContext
+from aeroweaver_edge.contracts.wire import Entity, InboxMessage
 
 MAX_TARGETS = 8
 """Options a target skill offers at most: the nearest visible targets (``ctx.settings``

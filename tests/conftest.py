@@ -3,13 +3,16 @@
 Every test runs in an empty working directory of its session (``_elsewhere``), so none can
 depend on being started from the repository root.
 
-Requirements (``tests/helpers/requirements.py``): a test marked ``embedded`` or ``mavsdk``
-fails when what it needs is not installed, unless ``AEROWEAVER_ALLOW_SKIP`` names it; the
-terminal summary says what was missing and whether that was allowed.
+The suite tests both distributions: without ``aeroweaver-lab`` (``pip install -e ./lab``) it
+refuses to start. Requirements (``tests/helpers/requirements.py``): a test marked
+``embedded`` or ``mavsdk`` fails when what it needs is not installed, unless
+``AEROWEAVER_ALLOW_SKIP`` names it; the terminal summary says what was missing and whether
+that was allowed.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import signal
 import threading
 from collections.abc import AsyncIterator, Iterator
@@ -31,6 +34,11 @@ def pytest_configure(config: pytest.Config) -> None:
         _allowed = allowed_skips()
     except ValueError as exc:
         raise pytest.UsageError(str(exc)) from None
+    if importlib.util.find_spec("aeroweaver_lab") is None:  # the suite tests both distributions
+        raise pytest.UsageError(
+            "the aeroweaver-lab distribution is not installed: pip install -e ./lab "
+            "(the README's test command installs it)"
+        )
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:

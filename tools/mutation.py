@@ -103,7 +103,7 @@ TASK_FILES = tuple(
 TARGETS: tuple[Target, ...] = (
     Target(
         "scoring",
-        ("aeroweaver_edge/agent/scoring.py", "aeroweaver_edge/scores.py"),
+        ("aeroweaver_edge/agent/scoring.py", "aeroweaver_edge/contracts/scores.py"),
         (
             f"{T}agent/test_scoring.py",
             f"{T}agent/test_llm_selector.py",
@@ -114,11 +114,11 @@ TARGETS: tuple[Target, ...] = (
     Target(
         "memory",
         (
-            "aeroweaver_edge/agent/memory.py",
-            "aeroweaver_edge/agent/memory_store.py",
-            "aeroweaver_edge/agent/memory_index.py",
-            "aeroweaver_edge/agent/memory_returns.py",
-            "aeroweaver_edge/agent/memory_senders.py",
+            "aeroweaver_edge/agent/memory/experience.py",
+            "aeroweaver_edge/agent/memory/store.py",
+            "aeroweaver_edge/agent/memory/index.py",
+            "aeroweaver_edge/agent/memory/returns.py",
+            "aeroweaver_edge/agent/memory/senders.py",
         ),
         (
             f"{T}agent/test_memory.py",
@@ -131,7 +131,7 @@ TARGETS: tuple[Target, ...] = (
     ),
     Target(
         "safety_gate",
-        ("aeroweaver_edge/safety_gate.py",),
+        ("aeroweaver_edge/safety/gate.py",),
         (
             f"{T}test_safety_gate.py",
             f"{T}test_decision_round.py",
@@ -143,7 +143,7 @@ TARGETS: tuple[Target, ...] = (
     ),
     Target(
         "peers+inbox",
-        ("aeroweaver_edge/peers.py", "aeroweaver_edge/inbox.py"),
+        ("aeroweaver_edge/mesh/peers.py", "aeroweaver_edge/mesh/inbox.py"),
         (
             f"{T}test_peers.py",
             f"{T}test_peers_limits.py",
@@ -155,7 +155,7 @@ TARGETS: tuple[Target, ...] = (
     ),
     Target(
         "decision_round",
-        ("aeroweaver_edge/decision_round.py",),
+        ("aeroweaver_edge/daemon/decision_round.py",),
         (
             f"{T}test_decision_round.py",
             f"{T}test_daemon.py",
@@ -215,7 +215,7 @@ BYPASS = b"""    _m = intent.motion  # MUTANT: the gate is wired around; the raw
 MANDATORY: tuple[tuple[str, str, str, bytes | tuple[bytes, ...], bytes], ...] = (
     (
         "decision_round",
-        "aeroweaver_edge/decision_round.py",
+        "aeroweaver_edge/daemon/decision_round.py",
         "gate bypassed: the executor's raw intent reaches the vehicle",
         (  # the call as it reads now, and as it read on main before issue 12
             b"    gated = rc.gate.gate(intent.motion, own.pos, neighbours, others)\n",
@@ -249,27 +249,28 @@ MANDATORY: tuple[tuple[str, str, str, bytes | tuple[bytes, ...], bytes], ...] = 
 # They are run and reported like every other mutant; the report gives the kill rate both
 # over all mutants and over the others.
 EQUIVALENT: dict[str, str] = {
-    "aeroweaver_edge/scores.py:51:43:>->>=": "leftover mass exactly 1e-12 never occurs",
-    "aeroweaver_edge/agent/memory.py:376:11:if-dropped": (
+    "aeroweaver_edge/contracts/scores.py:51:43:>->>=": "leftover mass exactly 1e-12 never occurs",
+    "aeroweaver_edge/agent/memory/experience.py:376:11:if-dropped": (
         "sqlite creates the missing file empty, which passes every check: None either way"
     ),
-    "aeroweaver_edge/agent/memory.py:399:15:and-operand-dropped#1": (
+    "aeroweaver_edge/agent/memory/experience.py:399:15:and-operand-dropped#1": (
         "only OperationalError says locked/busy/unable to open"
     ),
-    "aeroweaver_edge/agent/memory.py:730:33:and->or": (
+    "aeroweaver_edge/agent/memory/experience.py:730:33:and->or": (
         "a loaded group indexes every row of this run (appends add to it): i is never None"
     ),
-    "aeroweaver_edge/peers.py:233:27:const 1.0->2.0": (
+    "aeroweaver_edge/mesh/peers.py:233:27:const 1.0->2.0": (
         "collect_inbox's default timeout: every caller passes its own"
     ),
-    "aeroweaver_edge/peers.py:336:12:call-removed": (
+    "aeroweaver_edge/mesh/peers.py:336:12:call-removed": (
         "_beacon_seen is read only beside a _beacons entry and both are written together:"
         " a departed peer's stale arrival time is never read, the next beacon overwrites it"
     ),
 }
 BYPASS_IMPORT = (
-    b"from aeroweaver_edge.actions import HOLD, Intent, VehicleAction\n",
-    b"from aeroweaver_edge.actions import HOLD, Intent, MoveTo, SetVelocity, VehicleAction\n",
+    b"from aeroweaver_edge.contracts.actions import HOLD, Intent, VehicleAction\n",
+    b"from aeroweaver_edge.contracts.actions import HOLD, Intent, MoveTo, SetVelocity, "
+    b"VehicleAction\n",
 )
 
 

@@ -8,9 +8,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from aeroweaver_edge.observation import Observation
-from aeroweaver_edge.ports import Candidate
-from aeroweaver_edge.skill_api import SkillContext, SkillParams
+from aeroweaver_edge.contracts.observation import Observation
+from aeroweaver_edge.contracts.ports import Candidate
+from aeroweaver_edge.contracts.skill_api import SkillContext, SkillParams
 
 if TYPE_CHECKING:
     from aeroweaver_edge.skills import SkillRegistry

@@ -18,7 +18,7 @@ from typing import Final, Literal
 from aeroweaver_edge.agent.estimators import ENV_ESTIMATOR, Estimator
 from aeroweaver_edge.agent.scripted import ENV_BASE, Base
 from aeroweaver_edge.config import AgentConfig
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
 
 Field = Literal["estimator", "scripted_base"]
 ENV: Final[dict[Field, str]] = {"estimator": ENV_ESTIMATOR, "scripted_base": ENV_BASE}

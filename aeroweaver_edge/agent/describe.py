@@ -18,8 +18,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from aeroweaver_edge.observation import Observation, horizontal_distance
-from aeroweaver_edge.wire import Entity, Vec3
+from aeroweaver_edge.contracts.observation import Observation, horizontal_distance
+from aeroweaver_edge.contracts.wire import Entity, Vec3
 
 _COMPASS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW")
 

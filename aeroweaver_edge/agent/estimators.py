@@ -50,92 +50,23 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final
 
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.contracts.selector_specs import EstimatorSpec
 
 ENV_ESTIMATOR: Final = "AEROWEAVER_ESTIMATOR"
 Traj = tuple[str, str, int]  # (run, uav, episode)
 RunKey = tuple[str, str, int, int]  # (run, uav, episode, round)
 
-_USAGE = (
-    "expected paper, horizon:H, support:M, shrink:K, scale, tscore or centre (with a "
-    "horizon), or a comma-joined mix (horizon:3,centre,scale)"
-)
 SCALE_FLOOR: Final = 1e-3  # ``scale``: a neighbourhood whose values spread less is "no evidence"
 
 
 @dataclass(frozen=True)
-class Estimator:
+class Estimator(EstimatorSpec):
     """Which value a record has and how a neighbourhood's values become advantages."""
-
-    horizon: int | None = None  # None: the paper's return G_t
-    support: int = 1  # fewest eligible records for a skill's own advantage
-    centre: bool = False  # subtract the per-round mean H-step return of the group
-    shrink: int = 0  # a skill's advantage times n / (n + shrink): thin evidence says less
-    scale: bool = False  # advantages in units of the neighbourhood's spread of values
-    tscore: bool = False  # ... in units of the standard error of the skill's mean
-
-    @property
-    def name(self) -> str:
-        parts = [] if self.horizon is None else [f"horizon:{self.horizon}"]
-        if self.centre:
-            parts.append("centre")
-        if self.support > 1:
-            parts.append(f"support:{self.support}")
-        if self.shrink:
-            parts.append(f"shrink:{self.shrink}")
-        if self.scale:
-            parts.append("scale")
-        if self.tscore:
-            parts.append("tscore")
-        return ",".join(parts) or "paper"
 
     @property
     def is_paper(self) -> bool:
         return self == PAPER
-
-    @classmethod
-    def parse(cls, text: str) -> Estimator:
-        """``paper``, ``horizon:H``, ``support:M`` or a comma-joined mix; ``ValueError``
-        with one line naming the problem otherwise."""
-        horizon: int | None = None
-        support = 1
-        shrink = 0
-        centre = scale = tscore = False
-        parts = [p.strip() for p in text.split(",")]
-        if not text.strip() or any(not p for p in parts):
-            raise ValueError(f"estimator {text!r}: {_USAGE}")
-        for part in parts:
-            kind, _, arg = part.partition(":")
-            if kind == "paper" and not arg:
-                continue
-            if kind == "centre" and not arg:
-                centre = True
-                continue
-            if kind == "scale" and not arg:
-                scale = True
-                continue
-            if kind == "tscore" and not arg:
-                tscore = True
-                continue
-            if kind not in ("horizon", "support", "shrink"):
-                raise ValueError(f"estimator {text!r}: unknown part {part!r}; {_USAGE}")
-            try:
-                n = int(arg)
-            except ValueError:
-                n = 0
-            if not 1 <= n <= 1000:
-                raise ValueError(f"estimator {text!r}: {kind} needs a whole number 1..1000")
-            if kind == "horizon":
-                horizon = n
-            elif kind == "support":
-                support = n
-            else:
-                shrink = n
-        if centre and horizon is None:
-            raise ValueError(f"estimator {text!r}: centre needs a horizon (horizon:3,centre)")
-        if scale and tscore:
-            raise ValueError(f"estimator {text!r}: scale or tscore, not both")
-        return cls(horizon, support, centre, shrink, scale, tscore)
 
     def book(self, gamma: float) -> HorizonBook | None:
         """The per-group bookkeeping this estimator needs (``None``: the stored return)."""

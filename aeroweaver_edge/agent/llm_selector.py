@@ -27,6 +27,8 @@ from typing import Any
 
 from aeroweaver_edge.agent.prompt import OptionPlacement, PromptLimits, build_messages
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.contracts.ports import DecisionRequest
+from aeroweaver_edge.contracts.scores import LabelScores
 from aeroweaver_edge.llm.client import CallTag, ChatClient, LLMError
 from aeroweaver_edge.llm.logprobs import parse_label_scores
 from aeroweaver_edge.llm.probe import (
@@ -35,8 +37,6 @@ from aeroweaver_edge.llm.probe import (
     may_be_logprobs,
     refusal_verdict,
 )
-from aeroweaver_edge.ports import DecisionRequest
-from aeroweaver_edge.scores import LabelScores
 
 log = logging.getLogger(__name__)
 

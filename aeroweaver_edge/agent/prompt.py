@@ -50,9 +50,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from aeroweaver_edge.agent.describe import HUGE, place, pop_place
-from aeroweaver_edge.observation import MissionView, Observation, VehicleState
-from aeroweaver_edge.ports import Candidate, DecisionRequest
-from aeroweaver_edge.wire import InboxMessage
+from aeroweaver_edge.contracts.observation import MissionView, Observation, VehicleState
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import InboxMessage
 
 SYSTEM_PROMPT = (
     "You are the onboard decision agent of one UAV in a swarm. You control only your own "

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
-from aeroweaver_edge.scores import NOT_OBSERVED, Choice, LabelScores, omitted_bound
+from aeroweaver_edge.contracts.scores import NOT_OBSERVED, Choice, LabelScores, omitted_bound
 
 __all__ = ["NOT_OBSERVED", "Choice", "LabelScores", "choose", "omitted_bound"]
 

@@ -31,10 +31,11 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Final
 
-from aeroweaver_edge.defaults import HOLD_SKILL
-from aeroweaver_edge.errors import UserError
-from aeroweaver_edge.ports import DecisionRequest
-from aeroweaver_edge.scores import LabelScores
+from aeroweaver_edge.contracts.defaults import HOLD_SKILL
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.contracts.ports import DecisionRequest
+from aeroweaver_edge.contracts.scores import LabelScores
+from aeroweaver_edge.contracts.selector_specs import ScriptedBaseSpec
 from aeroweaver_edge.tasks.base import ReferencePolicy
 
 
@@ -90,51 +91,12 @@ class ReferenceScorer:
 
 HOLD_BIAS: Final = 3.0
 POSITION_BIAS: Final = 3.0
-NOISE_SD: Final = 2.0
-BASES: Final = ("reference", "hold-biased", "position-biased", "noisy")
 ENV_BASE: Final = "AEROWEAVER_SCRIPTED_BASE"
 
 
-def _positive(value: str, text: str, what: str) -> float:
-    try:
-        x = float(value)
-    except ValueError:
-        x = math.nan
-    if not (math.isfinite(x) and x > 0):
-        raise ValueError(f"scripted base {text!r}: {what} must be a positive number")
-    return x
-
-
 @dataclass(frozen=True)
-class Base:
+class Base(ScriptedBaseSpec):
     """A scripted base: the reference policy, optionally degraded (module docstring)."""
-
-    kind: str = "reference"
-    sd: float = NOISE_SD
-    seed: int = 0
-    temperature: float = 1.0  # log-softmax temperature: > 1 leaves the same argmax, less sure
-
-    @property
-    def name(self) -> str:
-        name = self.kind
-        if self.kind == "noisy" and self.sd != NOISE_SD:
-            name = f"noisy:{self.sd:g}"
-        return name if self.temperature == 1.0 else f"{name}@{self.temperature:g}"
-
-    @classmethod
-    def parse(cls, text: str) -> Base:
-        """``reference``, ``hold-biased``, ``position-biased`` or ``noisy[:SD]``, each
-        optionally ``@T`` (temperature T > 0); ``ValueError`` naming the choices otherwise."""
-        body, at, temp = text.strip().partition("@")
-        kind, colon, arg = body.partition(":")
-        if kind not in BASES or (colon and (kind != "noisy" or not arg)):
-            raise ValueError(
-                f"unknown scripted base {text!r}: expected one of reference, hold-biased, "
-                "position-biased, noisy[:SD], optionally @TEMPERATURE"
-            )
-        temperature = _positive(temp, text, "TEMPERATURE") if at else 1.0
-        sd = _positive(arg, text, "SD") if arg else NOISE_SD
-        return cls(kind, sd, temperature=temperature)
 
     def _rng(self, request: DecisionRequest) -> random.Random:
         o = request.observation
@@ -198,7 +160,6 @@ def scorer_from_env() -> ReferenceScorer:
 
 
 __all__ = [
-    "BASES",
     "ENV_BASE",
     "Base",
     "DegradedScorer",

@@ -19,8 +19,8 @@ import math
 import re
 
 from aeroweaver_edge.agent.describe import HUGE, describe_state, pop_place
-from aeroweaver_edge.observation import MissionView, Observation
-from aeroweaver_edge.wire import InboxMessage
+from aeroweaver_edge.contracts.observation import MissionView, Observation
+from aeroweaver_edge.contracts.wire import InboxMessage
 
 MAX_MESSAGES = 8  # newest messages summarised
 MAX_FIELDS = 6  # body fields per message

@@ -39,9 +39,9 @@ from starlette.responses import HTMLResponse, JSONResponse, Response, StreamingR
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from aeroweaver_edge.approval import VEHICLE_ACTION_SKILLS, parse_action
 from aeroweaver_edge.console.frames import FrameStore, encode
-from aeroweaver_edge.operator import OperatorError, OperatorLink, record_dict
+from aeroweaver_edge.safety.approval import VEHICLE_ACTION_SKILLS, parse_action
+from aeroweaver_edge.safety.operator import OperatorError, OperatorLink, record_dict
 
 KEEPALIVE_S = 10.0
 PATCH_BATCH_S = 0.1

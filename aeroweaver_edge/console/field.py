@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from aeroweaver_edge.console.frames import report_decision
+from aeroweaver_edge.contracts.wire import ProgressReport, VehicleStatus
 from aeroweaver_edge.orchestration.trace import entity_dict
-from aeroweaver_edge.wire import ProgressReport, VehicleStatus
 
 PERIOD_S = 0.5
 STALE_S = 3.0

@@ -25,9 +25,9 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from aeroweaver_edge.json_out import json_safe
+from aeroweaver_edge.contracts.wire import ProgressReport, WorldSnapshot
 from aeroweaver_edge.orchestration.trace import decision_dict, entity_dict
-from aeroweaver_edge.wire import ProgressReport, WorldSnapshot
+from aeroweaver_edge.runtime.json_out import json_safe
 
 MAX_FRAMES = 5000
 MAX_PATCHES = 20_000

@@ -25,9 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from aeroweaver_edge.console.field import PERIOD_S, FieldView
 from aeroweaver_edge.console.frames import FrameStore, report_decision, snapshot_frame
-from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.operator import record_dict
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.wire import (
     ApprovalStatus,
     Assignment,
     Keys,
@@ -35,9 +33,11 @@ from aeroweaver_edge.wire import (
     ProgressReport,
     WorldSnapshot,
 )
+from aeroweaver_edge.runtime.lifecycle import cancel_all
+from aeroweaver_edge.safety.operator import record_dict
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh, Subscription
+    from aeroweaver_edge.mesh.session import Mesh, Subscription
 
 log = logging.getLogger(__name__)
 WORLD_QUIET_S = 5.0

@@ -22,10 +22,10 @@ from aeroweaver_edge.config import MeshConfig
 from aeroweaver_edge.console.app import ConsoleApp
 from aeroweaver_edge.console.frames import FrameStore, load_trace
 from aeroweaver_edge.console.observer import SwarmObserver
-from aeroweaver_edge.errors import UserError
-from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.mesh import Mesh
-from aeroweaver_edge.operator import OPERATOR, OperatorLink
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.mesh.session import Mesh
+from aeroweaver_edge.runtime.lifecycle import cancel_all
+from aeroweaver_edge.safety.operator import OPERATOR, OperatorLink
 
 if TYPE_CHECKING:
     from aeroweaver_edge.orchestration.swarm import RunSummary, SwarmHandle, SwarmOptions

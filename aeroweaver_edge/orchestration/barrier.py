@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from aeroweaver_edge.wire import ProgressReport
+from aeroweaver_edge.contracts.wire import ProgressReport
 
 log = logging.getLogger(__name__)
 

@@ -5,7 +5,7 @@ the router between us is gone: from here these look alike); it is *rejoined* whe
 token comes back. ``mission start`` records both (``lost_uavs``: where each was lost;
 ``rejoined_uavs``: how often each came back) and stops the mission once every participant
 has been out of contact for the grace: nothing is flying it any more. The daemons hold by
-themselves when they lose the Commander (notes/safety.md).
+themselves when they lose the Commander (docs/notes/safety.md).
 """
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.wire import Keys, last_chunk
+from aeroweaver_edge.contracts.wire import Keys, last_chunk
+from aeroweaver_edge.runtime.lifecycle import cancel_all
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import LivelinessWatch, Mesh
+    from aeroweaver_edge.mesh.session import LivelinessWatch, Mesh
 
 log = logging.getLogger(__name__)
 

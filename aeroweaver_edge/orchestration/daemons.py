@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from aeroweaver_edge.agent import choices
 from aeroweaver_edge.config import UavConfig
-from aeroweaver_edge.run_dir import ENV_DIR, ENV_PARENT, LOCK_NAME
+from aeroweaver_edge.runtime.run_dir import ENV_DIR, ENV_PARENT, LOCK_NAME
 
 if TYPE_CHECKING:
     from aeroweaver_edge.skills import SkillRegistry
@@ -78,7 +78,7 @@ class DaemonSet:
             self.procs[cfg.uav] = await self._spawn(cfg.uav, "wb")
 
     def _start_task(self, cfg: UavConfig) -> None:
-        from aeroweaver_edge.app import run_daemon
+        from aeroweaver_edge.daemon.app import run_daemon
 
         self.tasks[cfg.uav] = asyncio.create_task(
             run_daemon(cfg, registry=self._registry), name=cfg.uav
@@ -97,7 +97,7 @@ class DaemonSet:
             return await asyncio.create_subprocess_exec(
                 sys.executable,
                 "-m",
-                "aeroweaver_edge.cli",
+                "aeroweaver_edge",
                 "daemon",
                 "--config",
                 str(self.workdir / f"{uav}.json"),

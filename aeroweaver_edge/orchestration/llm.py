@@ -67,8 +67,8 @@ async def seed_role_slots(
     uses slot ``i % n_slots``), so round 0 does not process the same system prompt once per
     UAV. Best effort (``llm/slot_seed.py``); returns how many slots were seeded."""
     from aeroweaver_edge.agent.prompt import prefix_messages
+    from aeroweaver_edge.contracts.observation import MissionView
     from aeroweaver_edge.llm.slot_seed import SlotGroup, seed_slots
-    from aeroweaver_edge.observation import MissionView
     from aeroweaver_edge.skills import load_skills
 
     if llm.base_url is None:

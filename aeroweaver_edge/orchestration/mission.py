@@ -21,20 +21,20 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
-from aeroweaver_edge import defaults as d
 from aeroweaver_edge.config import ConfigError, LLMConfig, MeshConfig, SafetyConfig, SimConfig
-from aeroweaver_edge.errors import UserError
-from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.contracts import defaults as d
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.contracts.wire import Keys, ProgressReport
+from aeroweaver_edge.mesh.secured import boot_headers
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.contact import ContactWatch
 from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.orchestration.run_health import mission_security
 from aeroweaver_edge.orchestration.swarm import until_stopped, world_task
+from aeroweaver_edge.runtime.lifecycle import cancel_all
 from aeroweaver_edge.security.identity import COMMANDER, WORLD
-from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.vehicle.sim import WAITING_FOR_WORLD
-from aeroweaver_edge.wire import Keys, ProgressReport
 from commander.commander import Commander
 from commander.harness import plan_from_text
 from commander.mission_start import discover_roster, progress_row

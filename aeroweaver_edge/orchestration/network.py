@@ -25,7 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh, MeshError
+from aeroweaver_edge.mesh.secured import ephemeral_swarm
+from aeroweaver_edge.mesh.session import Mesh, MeshError
 from aeroweaver_edge.security.identity import (
     CENTRAL,
     COMMANDER,
@@ -34,7 +35,6 @@ from aeroweaver_edge.security.identity import (
     WORLD,
     SwarmPki,
 )
-from aeroweaver_edge.security.wiring import ephemeral_swarm
 
 ROUTER = "router"
 

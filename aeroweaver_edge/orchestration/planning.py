@@ -9,16 +9,19 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+from typing import Final
+
 from pydantic import ValidationError
 
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.defaults import MAX_UAVS, TOP_K
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.defaults import MAX_UAVS, TOP_K
+from aeroweaver_edge.contracts.errors import UserError
 from aeroweaver_edge.tasks import TASK_NAMES, get_spec
 from aeroweaver_edge.tasks.base import uav_id
 from commander.harness import plan_for_task, plan_record
 from commander.mission_parser import MissionParseError, parse_mission
-from commander.plan import MissionPlan
+from commander.plan import MissionPlan, UavAssignment
 from commander.task_record import validation_summary
 
 
@@ -81,4 +84,50 @@ async def plan_run(
     return plan
 
 
-__all__ = ["PlanError", "natural", "plan_run", "uav_ids"]
+WIDE_SLOT_CTX: Final = 4096
+"""The embedded server's context per cache slot when prompts carry all 22 skill documents
+(~2,300 tokens on their own): the full catalogue, and a central node's prompts."""
+
+
+def with_full_catalogue(plan: MissionPlan) -> MissionPlan:
+    """Every UAV gets the whole task-skill catalogue: no role filter, no top-K (the
+    baselines and the "without skill activation" ablation)."""
+    from aeroweaver_edge.skills import load_skills
+    from commander.activation import full_catalogue
+
+    skills = full_catalogue(load_skills())
+    return replace(
+        plan,
+        assignments={
+            u: UavAssignment(a.role, a.local_goal, skills) for u, a in plan.assignments.items()
+        },
+        catalogue=skills,
+    )
+
+
+def with_seeded_order(plan: MissionPlan, seed: int) -> MissionPlan:
+    """Every UAV's skill list (hence its option letters) in the order of
+    ``agent.candidates.seeded_order`` keyed by (task, seed, UAV), the same for every
+    condition that shares a skill, so option labels follow neither the alphabet nor the
+    activation rank; the plan is recorded in the trace header, and each decision's
+    lettered options in its round line."""
+    from aeroweaver_edge.agent.candidates import seeded_order
+
+    return replace(
+        plan,
+        assignments={
+            u: replace(a, skills=tuple(seeded_order(a.skills, f"{plan.task}|{seed}|{u}")))
+            for u, a in plan.assignments.items()
+        },
+    )
+
+
+__all__ = [
+    "WIDE_SLOT_CTX",
+    "PlanError",
+    "natural",
+    "plan_run",
+    "uav_ids",
+    "with_full_catalogue",
+    "with_seeded_order",
+]

@@ -9,11 +9,11 @@ from __future__ import annotations
 from collections import Counter
 from typing import TYPE_CHECKING, Any
 
-from aeroweaver_edge.hold_reasons import count_causes
+from aeroweaver_edge.contracts.hold_reasons import count_causes
 from commander.progress import ProgressBoard
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.mesh.session import Mesh
     from aeroweaver_edge.sim.runner import WorldRunner
 
 

@@ -26,9 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-from aeroweaver_edge import defaults as d
 from aeroweaver_edge.agent import choices
-from aeroweaver_edge.agent.memory import new_run_id
+from aeroweaver_edge.agent.memory.experience import new_run_id
 from aeroweaver_edge.config import (
     AgentConfig,
     ApprovalConfig,
@@ -38,27 +37,30 @@ from aeroweaver_edge.config import (
     SimConfig,
     UavConfig,
 )
-from aeroweaver_edge.errors import RunFailed, UserError
-from aeroweaver_edge.json_out import write_json_file
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.contracts import defaults as d
+from aeroweaver_edge.contracts.errors import RunFailed, UserError
+from aeroweaver_edge.mesh.secured import boot_headers
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.barrier import DEFAULT_TIMEOUT_S as BARRIER_TIMEOUT_S
 from aeroweaver_edge.orchestration.barrier import ExperienceBarrier
+from aeroweaver_edge.orchestration.central import CentralRole
 from aeroweaver_edge.orchestration.daemons import DaemonSet, DaemonsFailed
 from aeroweaver_edge.orchestration.llm import HONESTY_NOTE, probe, seed_role_slots, shared_llm
 from aeroweaver_edge.orchestration.network import RunNetwork, run_network
 from aeroweaver_edge.orchestration.network import free_port as free_port
-from aeroweaver_edge.orchestration.planning import natural, plan_run, uav_ids
-from aeroweaver_edge.orchestration.run_health import health_fields, security_fields
-from aeroweaver_edge.orchestration.trace import TraceRecorder
-from aeroweaver_edge.orchestration.variants import (
+from aeroweaver_edge.orchestration.planning import (
     WIDE_SLOT_CTX,
-    add_central,
+    natural,
+    plan_run,
+    uav_ids,
     with_full_catalogue,
     with_seeded_order,
 )
-from aeroweaver_edge.run_dir import RunDir, sweep_stale
+from aeroweaver_edge.orchestration.run_health import health_fields, security_fields
+from aeroweaver_edge.orchestration.trace import TraceRecorder
+from aeroweaver_edge.runtime.json_out import write_json_file
+from aeroweaver_edge.runtime.run_dir import RunDir, sweep_stale
 from aeroweaver_edge.security.identity import CENTRAL, COMMANDER, WORLD
-from aeroweaver_edge.security.wiring import boot_headers
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.tasks import create, get_spec
@@ -98,17 +100,17 @@ class SwarmOptions:
     trace_path: Path | None = None  # write the per-round trace here (JSONL, docs/traces.md)
     secure: bool = True  # TLS (mutual) + ACL + signatures with per-run identities
     safety: SafetyConfig = field(default_factory=SafetyConfig)  # the daemons'; the world checks it
-    # Benchmark conditions (docs/benchmark.md): a baseline's central node chooses for every
-    # UAV (selector must be "llm"); "full" activation gives every UAV the whole task-skill
-    # catalogue (no role filter, no top-K); coordination=False sends task messages only.
-    baseline: Literal["none", "centralized", "hmas2"] = "none"
+    # Benchmark conditions (docs/benchmark.md): a central node chooses for every UAV
+    # (orchestration.central; the lab's baselines; selector must be "llm"); "full"
+    # activation gives every UAV the whole task-skill catalogue (no role filter, no
+    # top-K); coordination=False sends task messages only.
+    central: CentralRole | None = None
     activation: Literal["topk", "full"] = "topk"
     coordination: bool = True
     # Option letters: "activation" (the Commander's order, the alphabet for the full
     # catalogue; sim and field) or "seeded" (the benchmark: a seeded order per task, seed and
-    # UAV shared by every condition, orchestration.variants.with_seeded_order).
+    # UAV shared by every condition, orchestration.planning.with_seeded_order).
     option_order: Literal["activation", "seeded"] = "activation"
-    central_gather_s: float = 3.0  # the central node waits this long for a round's asks
     finalised_only: bool = False  # AgentConfig.finalised_only (retrieval of ended episodes)
     # AgentConfig.estimator / .scripted_base; None: AEROWEAVER_ESTIMATOR /
     # AEROWEAVER_SCRIPTED_BASE if set, else the default (agent.choices)
@@ -372,8 +374,8 @@ async def run_swarm(
         # One embedded-server cache slot per UAV we expect to fly (the plan is not made yet:
         # it may need the LLM); a larger mission shares slots round-robin.
         n_slots = opts.uavs or get_spec(opts.task or "coverage").team_size
-        central_slot = n_slots if opts.baseline != "none" else None  # its own cache slot
-        wide = opts.baseline != "none" or opts.activation == "full"  # 22 skill documents
+        central_slot = n_slots if opts.central is not None else None  # its own cache slot
+        wide = opts.central is not None or opts.activation == "full"  # 22 skill documents
         llm, source = await stack.enter_async_context(
             shared_llm(
                 opts.llm,
@@ -411,8 +413,8 @@ async def run_swarm(
             note=HONESTY_NOTE[source],
             run_id=new_run_id(),  # one per run: its records never collide with another run's
         )
-        if opts.baseline != "none" and opts.selector != "llm":
-            raise RunFailed(f"the {opts.baseline} baseline needs an LLM (selector llm)")
+        if opts.central is not None and opts.selector != "llm":
+            raise RunFailed(f"the {opts.central.selector} baseline needs an LLM (selector llm)")
         if opts.selector == "llm":
             summary.model = llm.model
             verdict = await probe(llm)
@@ -420,8 +422,8 @@ async def run_swarm(
                 raise UserError(verdict.unanswered_line())
             summary.probe, summary.probe_kind = verdict.line(), verdict.kind
             summary.selector = f"llm:{llm.model}"
-            if opts.baseline != "none":
-                summary.selector = f"central:{opts.baseline}:{llm.model}"
+            if opts.central is not None:
+                summary.selector = f"central:{opts.central.selector}:{llm.model}"
         else:
             summary.selector = f"scripted:{scripted_base}"
         if on_plan is not None:  # who flies what, before it flies (and after every refusal)
@@ -505,18 +507,14 @@ async def run_swarm(
         pin_slots = source == "embedded" if opts.slots is None else opts.slots
         pin_slots = pin_slots and source != "scripted"
         central = None
-        if opts.baseline != "none":
-            from aeroweaver_edge.baselines.wiring import open_central
-
+        if opts.central is not None:
             central_llm = llm.model_copy(update={"slot": central_slot}) if pin_slots else llm
             central = await stack.enter_async_context(
-                open_central(
-                    opts.baseline,
+                opts.central.open(
                     net.config(CENTRAL),
                     opts.swarm,
                     central_llm,
-                    gather_s=opts.central_gather_s,
-                    on_round=recorder.on_central if recorder is not None else None,
+                    recorder.on_central if recorder is not None else None,
                 )
             )
         configs = [
@@ -526,7 +524,7 @@ async def run_swarm(
                 mesh=net.config(u),
                 llm=llm.model_copy(update={"slot": i % n_slots}) if pin_slots else llm,
                 agent=AgentConfig(
-                    selector=opts.selector if opts.baseline == "none" else opts.baseline,
+                    selector=opts.selector if opts.central is None else opts.central.selector,
                     beta=opts.beta,
                     gamma=opts.gamma,
                     memory_path=str(memory_dir / f"{u}.sqlite3"),
@@ -566,7 +564,7 @@ async def run_swarm(
             runner.shutdown()  # the run is over: the others are not "lost"
             daemons.terminate()  # and would wait for a mission until stop's timeout
             raise RunFailed(f"daemon failed at start-up: {exc}") from None
-        if pin_slots and opts.baseline == "none":  # best effort: needs llama-server slot files
+        if pin_slots and opts.central is None:  # best effort: needs llama-server slot files
             await seed_role_slots(llm, plan, uavs, n_slots, history=opts.history_rounds > 0)
 
         try:
@@ -638,7 +636,7 @@ async def run_swarm(
             e["tokens"] = board.episode_tokens.get(e["episode"], 0)
         if central is not None:  # counted where spent: the UAVs' (local) and the central node's
             summary.central = central.totals()
-            add_central(summary, summary.central)
+            fold_central_tokens(summary, summary.central)
         summary.tokens_by_agent = {
             u: p.prompt_tokens + p.completion_tokens
             for u, p in sorted(board.uavs.items(), key=lambda kv: natural(kv[0]))
@@ -658,6 +656,27 @@ async def run_swarm(
     return summary
 
 
+def fold_central_tokens(summary: RunSummary, central: dict[str, Any]) -> None:
+    """Fold the central node's tokens and calls into ``summary`` (totals and per episode),
+    keeping the split in ``tokens_by_side`` (the UAVs' own calls vs the central node's)."""
+    uav_side = dict(summary.tokens)
+    ct = central["tokens"]
+    summary.tokens_by_side = {"uavs": uav_side, "central": dict(ct)}
+    summary.tokens = {k: uav_side.get(k, 0) + ct.get(k, 0) for k in uav_side}
+    summary.llm_calls += central["llm_calls"]
+    calls = summary.llm_calls
+    if calls:
+        t = summary.tokens
+        summary.tokens_per_decision = {
+            "prompt": round(t["prompt"] / calls, 1),
+            "prompt_cached": round(t["prompt_cached"] / calls, 1),
+            "prompt_uncached": round((t["prompt"] - t["prompt_cached"]) / calls, 1),
+            "completion": round(t["completion"] / calls, 2),
+        }
+    for e in summary.episodes:
+        e["tokens"] += central["by_episode"].get(str(e["episode"]), {}).get("tokens", 0)
+
+
 def write_json(summary: RunSummary, path: Path) -> None:
     """Strict JSON (never NaN), written atomically: a reader never sees half a file."""
     write_json_file(path, summary.as_dict())
@@ -672,6 +691,7 @@ __all__ = [
     "RunSummary",
     "SwarmHandle",
     "SwarmOptions",
+    "fold_central_tokens",
     "percentiles",
     "run_swarm",
     "until_stopped",

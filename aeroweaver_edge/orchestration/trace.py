@@ -24,10 +24,10 @@ from typing import Any
 
 import msgspec
 
-from aeroweaver_edge.json_out import write_jsonl_file
+from aeroweaver_edge.contracts.wire import Entity, ProgressReport, Vec3
+from aeroweaver_edge.runtime.json_out import write_jsonl_file
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog
-from aeroweaver_edge.wire import Entity, ProgressReport, Vec3
 
 TRACE_VERSION = 1
 

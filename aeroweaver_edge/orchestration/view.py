@@ -8,10 +8,10 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from aeroweaver_edge.hold_reasons import format_counts
+from aeroweaver_edge.contracts.hold_reasons import format_counts
+from aeroweaver_edge.contracts.wire import ProgressReport
 from aeroweaver_edge.orchestration.planning import natural
 from aeroweaver_edge.sim.runner import RoundLog
-from aeroweaver_edge.wire import ProgressReport
 from commander.progress import ProgressBoard
 
 LEGEND = (

@@ -34,7 +34,7 @@ from cryptography.hazmat.primitives.asymmetric import ec
 
 from aeroweaver_edge.config import SecurityConfig, check_id
 from aeroweaver_edge.security import pki
-from aeroweaver_edge.security.pki import PkiError
+from aeroweaver_edge.security.key_files import PkiError
 from aeroweaver_edge.security.policy import Role
 
 FORMAT = 1

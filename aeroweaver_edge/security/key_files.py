@@ -21,12 +21,14 @@ from cryptography.exceptions import UnsupportedAlgorithm
 from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.types import PrivateKeyTypes
 
-from aeroweaver_edge.security.pki import PkiError
-
 MAX_KEY_BYTES = 64 * 1024
 """A PEM private key is a few hundred bytes; anything this large is not one."""
 
 _ACL_XATTR = "system.posix_acl_access"
+
+
+class PkiError(ValueError):
+    """Key material is missing, malformed or does not fit together; the message says which."""
 
 
 def _has_acl(path: Path) -> bool:

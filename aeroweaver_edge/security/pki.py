@@ -26,11 +26,9 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec, ed25519
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from aeroweaver_edge.security.key_files import PkiError, load_private_key, read_private
+
 DEFAULT_HOSTS: tuple[str, ...] = ("127.0.0.1", "localhost", "::1")
-
-
-class PkiError(ValueError):
-    """Key material is missing, malformed or does not fit together; the message says which."""
 
 
 @dataclass(frozen=True)
@@ -173,8 +171,6 @@ def cert_fingerprint(cert_pem: bytes) -> str:
 
 def load_signing_key(path: Path) -> ed25519.Ed25519PrivateKey:
     """The message-signing key, checked like ssh checks a key (``key_files``)."""
-    from aeroweaver_edge.security.key_files import load_private_key
-
     key = load_private_key(path, "signing key")
     if not isinstance(key, ed25519.Ed25519PrivateKey):
         raise PkiError(f"{path}: not an Ed25519 private key (a signing key is Ed25519)")
@@ -184,8 +180,6 @@ def load_signing_key(path: Path) -> ed25519.Ed25519PrivateKey:
 def load_tls_key(key_path: Path, cert: x509.Certificate, cert_path: Path) -> None:
     """The TLS private key is private, parses, and belongs to ``cert`` (Zenoh reads the file
     itself, so this is the one place a wrong or leaked key is caught with its name)."""
-    from aeroweaver_edge.security.key_files import load_private_key
-
     key = load_private_key(key_path, "TLS private key")
     if not isinstance(key, ec.EllipticCurvePrivateKey) or raw_pub_der(key) != cert_pub_der(cert):
         raise PkiError(f"{key_path}: not the private key of {cert_path}")
@@ -199,8 +193,6 @@ def load_cert(path: Path) -> x509.Certificate:
 
 
 def load_ca(cert_path: Path, key_path: Path) -> CertifiedKey:
-    from aeroweaver_edge.security.key_files import read_private
-
     ca = CertifiedKey(_read(cert_path), read_private(key_path, "CA private key"))
     try:
         key = serialization.load_pem_private_key(ca.key_pem, password=None)

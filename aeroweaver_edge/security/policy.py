@@ -36,7 +36,7 @@ from typing import Any
 
 import zenoh
 
-from aeroweaver_edge.wire import Keys
+from aeroweaver_edge.contracts.wire import Keys
 
 
 class Role(enum.StrEnum):

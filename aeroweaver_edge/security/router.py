@@ -1,7 +1,7 @@
 """A LAN Zenoh router as a Python process (there is no ``zenohd`` on PyPI or in Debian).
 
 A zenoh-python session opened in ``router`` mode routes pub/sub, queries and liveliness for
-its clients and peers (notes/zenoh.md). It runs the swarm ACL like every other node; the ACL
+its clients and peers (docs/notes/zenoh.md). It runs the swarm ACL like every other node; the ACL
 is per hop, so the router is where client-mode UAVs' writes are judged, and signatures are
 what keep a compromised router from forging payloads.
 """

@@ -16,7 +16,7 @@ from typing import Any
 from aeroweaver_edge.config import SecurityConfig
 from aeroweaver_edge.security import pki
 from aeroweaver_edge.security.identity import IdentityList
-from aeroweaver_edge.security.pki import PkiError
+from aeroweaver_edge.security.key_files import PkiError
 from aeroweaver_edge.security.policy import Authorizer, Role, build_acl
 from aeroweaver_edge.security.signing import MessageAuth, Signer, Verifier
 

@@ -30,8 +30,8 @@ from collections.abc import Collection
 
 import msgspec
 
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.wire import Keys, SimCommand, Vec3
+from aeroweaver_edge.contracts.wire import Keys, SimCommand, Vec3
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 MAX_REFS = 64  # message references one command may list (a round's sends, with room)
 TOLERANCE = 1e-6  # metres (and m/s): float noise in a gated command is not a violation

@@ -6,7 +6,7 @@ every command a controlled UAV's body is about to fly against the configured env
 daemons' ``SafetyConfig``): a gate that is bypassed, mis-wired or wrong shows up here as a
 counted violation, by kind and by UAV, in the run summary. Swarm tests assert zero.
 
-It is deliberately an independent oracle: it does not import or reuse ``safety_gate.py``,
+It is deliberately an independent oracle: it does not import or reuse ``safety/gate.py``,
 only the envelope's numbers, and states each rule once from the envelope's definition:
 
 * ``speed``: the commanded speed (3-D, as a real autopilot would fly it) is at most
@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any, Final, Literal
 
 from aeroweaver_edge.config import SafetyConfig
-from aeroweaver_edge.wire import Vec3
+from aeroweaver_edge.contracts.wire import Vec3
 
 Kind = Literal["speed", "geofence", "altitude", "separation"]
 KINDS: Final[tuple[Kind, ...]] = ("speed", "geofence", "altitude", "separation")

@@ -1,6 +1,6 @@
 """The authors' episode loop and termination rule, independent of how decisions are made.
 
-Each round (notes/mpe-tasks.md): the world's own agents decide on the frozen state, every
+Each round (docs/notes/mpe-tasks.md): the world's own agents decide on the frozen state, every
 decision is applied (a velocity, or a hold; a guess is recorded by the task), the world
 advances one round, the task's dynamics run (pickups, deliveries, visits), rewards are
 evaluated on the new state and added *undiscounted* to each body's return, then the task's
@@ -21,9 +21,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.wire import InboxMessage, Vec3
 from aeroweaver_edge.tasks.base import Action, Metrics, TaskDefinition
-from aeroweaver_edge.wire import InboxMessage, Vec3
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 EndReason = Literal["complete", "horizon"]
 

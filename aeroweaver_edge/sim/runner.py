@@ -29,15 +29,8 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from aeroweaver_edge.config import SafetyConfig, SimConfig
-from aeroweaver_edge.defaults import COMM_RADIUS_M
-from aeroweaver_edge.inbox import RADIO_DROPS
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.sim.command_check import CommandCheck
-from aeroweaver_edge.sim.envelope import EnvelopeCheck, Violation
-from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
-from aeroweaver_edge.tasks.base import TaskDefinition
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.defaults import COMM_RADIUS_M
+from aeroweaver_edge.contracts.wire import (
     BROADCAST,
     Entity,
     HeaderFactory,
@@ -52,10 +45,17 @@ from aeroweaver_edge.wire import (
     WorldSnapshot,
     last_chunk,
 )
+from aeroweaver_edge.mesh.inbox import RADIO_DROPS
+from aeroweaver_edge.runtime.lifecycle import cancel_all
+from aeroweaver_edge.sim.command_check import CommandCheck
+from aeroweaver_edge.sim.envelope import EnvelopeCheck, Violation
+from aeroweaver_edge.sim.episode import Episode, EpisodeResult, RoundResult
+from aeroweaver_edge.tasks.base import TaskDefinition
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh
-    from aeroweaver_edge.peers import PeerLink
+    from aeroweaver_edge.mesh.peers import PeerLink
+    from aeroweaver_edge.mesh.session import Mesh
     from aeroweaver_edge.sim.emulator.bridge import EmulatorBridge
 
 log = logging.getLogger(__name__)
@@ -129,7 +129,7 @@ class WorldRunner:
         self._listeners: dict[str, PeerLink] = {}
 
     async def start(self) -> None:
-        from aeroweaver_edge.peers import PeerLink
+        from aeroweaver_edge.mesh.peers import PeerLink
 
         for body in self.task.scripted_listeners:
             link = PeerLink(

@@ -11,7 +11,7 @@ mpe2 rewards (``rewards``), the completion flag (``complete``) and the metrics. 
 policy scores candidates for ``--selector scripted``.
 
 The episode loop (``aeroweaver_edge.sim.episode``) and the networked runner call it; physics
-stays in ``aeroweaver_edge.kinematics``. The call order of one round is::
+stays in ``aeroweaver_edge.world.kinematics``. The call order of one round is::
 
     scripted_actions(world, round, inboxes)   # the world's own agents decide on the frozen state
     record_guess(uav, guess)                  # for every command that carries a guess
@@ -32,15 +32,15 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from aeroweaver_edge.config import SimConfig
-from aeroweaver_edge.defaults import ALTITUDE_M, COMM_RADIUS_M
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.defaults import ALTITUDE_M, COMM_RADIUS_M
+from aeroweaver_edge.contracts.wire import Entity, InboxMessage, Vec3
 from aeroweaver_edge.tasks.spec import TaskSpec
-from aeroweaver_edge.wire import Entity, InboxMessage, Vec3
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from aeroweaver_edge.ports import DecisionRequest
+    from aeroweaver_edge.contracts.ports import DecisionRequest
 
 Metrics = dict[str, float]
 """Flat, JSON-friendly metrics, e.g. ``{"near_collisions": 0, "landmark_min_dist_m.L0": 2.5}``."""

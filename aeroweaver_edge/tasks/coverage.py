@@ -22,14 +22,14 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, ClassVar, Final
 
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.observation import horizontal_distance
-from aeroweaver_edge.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.observation import horizontal_distance
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.tasks import policy
 from aeroweaver_edge.tasks.base import NE, Layout, Metrics, TaskDefinition
 from aeroweaver_edge.tasks.layout import group_offset, scatter, shifted, spawn_row
 from aeroweaver_edge.tasks.spec import RoleSpec, TaskSpec
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 if TYPE_CHECKING:
     import numpy as np

@@ -17,12 +17,12 @@ import math
 from abc import abstractmethod
 from typing import TYPE_CHECKING, Any
 
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.tasks import policy
 from aeroweaver_edge.tasks.base import NE, Layout, Metrics, TaskDefinition
 from aeroweaver_edge.tasks.layout import group_offset, spawn_row
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 if TYPE_CHECKING:
     import numpy as np

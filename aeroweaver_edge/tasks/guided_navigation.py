@@ -22,14 +22,14 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, ClassVar, Final
 
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.tasks import policy
 from aeroweaver_edge.tasks.base import Layout, Metrics, TaskDefinition
 from aeroweaver_edge.tasks.coverage import LANDMARKS_NE, landmark_id
 from aeroweaver_edge.tasks.layout import SPAWN_JITTER_M, group_offset, shifted, spawn_base
 from aeroweaver_edge.tasks.spec import RoleSpec, TaskSpec
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 if TYPE_CHECKING:
     import numpy as np

@@ -1,4 +1,5 @@
-"""Seeded layout helpers shared by the task definitions (authors' substrate, notes/mpe-tasks.md).
+"""Seeded layout helpers shared by the task definitions (authors' substrate,
+docs/notes/mpe-tasks.md).
 
 * UAV ``i`` spawns at (-38 + 14 i, -34 ± 5) plus ±4 m jitter per axis. The note leaves the
   ±5 unspecified; it alternates, +5 for even i and -5 for odd i, so neighbours start 10 m

@@ -2,7 +2,7 @@
 
 The project flies its own physics (MPE's dynamics are meaningless in metres) but takes the
 reward *definitions* from ``mpe2`` so the benchmark scores what the authors scored
-(notes/mpe-tasks.md). The recipe:
+(docs/notes/mpe-tasks.md). The recipe:
 
 * build the scenario's world once (``make_world`` + ``reset_world``; the reset initialises
   colours, velocities and comm vectors that mpe2 refuses to read while unset);
@@ -19,7 +19,7 @@ mpe2 is imported lazily (the first scenario import pulls pygame and takes ~0.3 s
 ``PYGAME_HIDE_SUPPORT_PROMPT`` is set before that import so pygame prints no banner. A daemon
 process never builds a reward model, so it never imports mpe2, pygame or scipy.
 
-Scaling (notes/mpe-tasks.md): 70 m per unit, x = north, y = east, arena centre at the
+Scaling (docs/notes/mpe-tasks.md): 70 m per unit, x = north, y = east, arena centre at the
 origin, for every task except the two formations, which follow the authors' option A: each
 formation is normalised to mpe2's native target size (circle: centre on the centre marker,
 R / 0.5 metres per unit; line: centre between the outer slots, span / 1.25 metres per unit).
@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from aeroweaver_edge.defaults import MPE_UNIT_M
+from aeroweaver_edge.contracts.defaults import MPE_UNIT_M
 
 __all__ = ["MPE_UNIT_M", "MpeRewardModel", "UnitScale", "scenario_class"]
 

@@ -16,10 +16,10 @@ import math
 from collections.abc import Callable, Iterable
 from typing import Final
 
-from aeroweaver_edge.defaults import ARENA_HALF_M, HOLD_SKILL
-from aeroweaver_edge.observation import Observation, horizontal_distance
-from aeroweaver_edge.ports import Candidate, DecisionRequest
-from aeroweaver_edge.wire import Entity, Vec3
+from aeroweaver_edge.contracts.defaults import ARENA_HALF_M, HOLD_SKILL
+from aeroweaver_edge.contracts.observation import Observation, horizontal_distance
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import Entity, Vec3
 
 UNKNOWN: Final = -4.0
 HOLD: Final = -3.0

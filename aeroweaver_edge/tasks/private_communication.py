@@ -28,13 +28,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, ClassVar, Final
 
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import InboxMessage
 from aeroweaver_edge.tasks import policy
 from aeroweaver_edge.tasks.base import HOLD_ACTION, Action, Layout, Metrics, TaskDefinition
 from aeroweaver_edge.tasks.layout import spawn_row
 from aeroweaver_edge.tasks.spec import RED, RoleSpec, TaskSpec
-from aeroweaver_edge.wire import InboxMessage
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 if TYPE_CHECKING:
     import numpy as np

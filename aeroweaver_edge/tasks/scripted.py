@@ -9,11 +9,11 @@ world's agents are the environment and do not pass a safety gate.
 
 from __future__ import annotations
 
-from aeroweaver_edge.defaults import ALTITUDE_M
-from aeroweaver_edge.kinematics import Body, KinematicWorld, steer
-from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.contracts.defaults import ALTITUDE_M
+from aeroweaver_edge.contracts.skill_api import SkillContext
 from aeroweaver_edge.tasks.base import NE, Action
 from aeroweaver_edge.tasks.policy import BOUNDARY_M
+from aeroweaver_edge.world.kinematics import Body, KinematicWorld, steer
 
 
 def context(body: Body, index: int, task: str, altitude_m: float = ALTITUDE_M) -> SkillContext:

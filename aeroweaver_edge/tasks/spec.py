@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from aeroweaver_edge.defaults import COMM_RADIUS_M, MAX_ROUNDS, MAX_UAVS, SENSING_RADIUS_M
+from aeroweaver_edge.contracts.defaults import COMM_RADIUS_M, MAX_ROUNDS, MAX_UAVS, SENSING_RADIUS_M
 
 BLUE = "blue"
 """The controlled team (our UAVs)."""

@@ -35,14 +35,14 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, ClassVar, Final
 
-from aeroweaver_edge.kinematics import Body, KinematicWorld
-from aeroweaver_edge.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import Entity, InboxMessage
 from aeroweaver_edge.tasks import policy, scripted
 from aeroweaver_edge.tasks.base import NE, Action, Layout, Metrics, TaskDefinition
 from aeroweaver_edge.tasks.layout import group_offset, shifted, spawn_row
 from aeroweaver_edge.tasks.pursuit_evasion import _reported_distance
 from aeroweaver_edge.tasks.spec import RED, RoleSpec, TaskSpec
-from aeroweaver_edge.wire import Entity, InboxMessage
+from aeroweaver_edge.world.kinematics import Body, KinematicWorld
 
 if TYPE_CHECKING:
     import numpy as np

@@ -6,3 +6,6 @@ class VehicleError(RuntimeError):
 
     The flight-phase guard turns it into a hold of this UAV only; it never ends the daemon.
     """
+
+    def explain(self) -> tuple[int, str]:
+        return 1, f"vehicle: {self}"  # the vehicle link could not be brought up

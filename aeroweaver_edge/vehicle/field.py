@@ -15,8 +15,8 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 
-from aeroweaver_edge.ports import Percept, RewardEvent, RoundTick, Vehicle
-from aeroweaver_edge.wire import Entity, MsgRef, StateBeacon
+from aeroweaver_edge.contracts.ports import Percept, RewardEvent, RoundTick, Vehicle
+from aeroweaver_edge.contracts.wire import Entity, MsgRef, StateBeacon
 
 
 class WallClock:

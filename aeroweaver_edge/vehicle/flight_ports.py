@@ -11,12 +11,12 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING, Any
 
-from aeroweaver_edge.wire import Entity, HeaderFactory, Keys
+from aeroweaver_edge.contracts.wire import Entity, HeaderFactory, Keys
 
 if TYPE_CHECKING:
     from aeroweaver_edge.config import UavConfig
-    from aeroweaver_edge.daemon import DaemonPorts
-    from aeroweaver_edge.mesh import Mesh
+    from aeroweaver_edge.contracts.ports import DaemonPorts
+    from aeroweaver_edge.mesh.session import Mesh
 
 
 def make_backend(cfg: UavConfig) -> Any:
@@ -35,7 +35,7 @@ def make_backend(cfg: UavConfig) -> Any:
 def flight_ports(
     cfg: UavConfig, mesh: Mesh, headers: HeaderFactory
 ) -> tuple[DaemonPorts, Callable[[], Awaitable[None]], Callable[[], Awaitable[None]]]:
-    from aeroweaver_edge.daemon import DaemonPorts
+    from aeroweaver_edge.contracts.ports import DaemonPorts
 
     backend = make_backend(cfg)
     if cfg.vehicle.sim_world:

@@ -9,10 +9,10 @@ set the body's setpoint in the world at once; the caller advances the world.
 
 from __future__ import annotations
 
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.observation import VehicleState
-from aeroweaver_edge.ports import Health, Percept, RoundTick
+from aeroweaver_edge.contracts.observation import VehicleState
+from aeroweaver_edge.contracts.ports import Health, Percept, RoundTick
 from aeroweaver_edge.tasks.base import TaskDefinition
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 
 class LocalBody:

@@ -1,7 +1,7 @@
 """The optional ``mavsdk`` Vehicle backend (``pip install aeroweaver-edge[mavsdk]``).
 
 MAVSDK 4.x is a ctypes binding over a bundled C library: ``Mavsdk(Configuration...)``,
-``add_any_connection``, ``first_autopilot``; ``System()`` is gone (notes/mavlink.md).
+``add_any_connection``, ``first_autopilot``; ``System()`` is gone (docs/notes/mavlink.md).
 Warnings from the notes that shape this module:
 
 * MAVSDK re-sends the last offboard setpoint at 20 Hz from its own C++ thread, so a stalled
@@ -27,12 +27,12 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from aeroweaver_edge.observation import VehicleState
-from aeroweaver_edge.ports import Health
+from aeroweaver_edge.contracts.observation import VehicleState
+from aeroweaver_edge.contracts.ports import Health
+from aeroweaver_edge.contracts.wire import VehicleStatus
 from aeroweaver_edge.vehicle.errors import VehicleError
 from aeroweaver_edge.vehicle.mavlink.geo import GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.personality import PERSONALITIES, ParamRule
-from aeroweaver_edge.wire import VehicleStatus
 
 if TYPE_CHECKING:
     from aeroweaver_edge.config import SafetyConfig, VehicleConfig
@@ -184,7 +184,7 @@ class MavsdkVehicle:
             )
         self._system = system
         raw = system._system
-        # Plugins right after discovery, telemetry by subscription (notes/mavlink.md).
+        # Plugins right after discovery, telemetry by subscription (docs/notes/mavlink.md).
         self._telemetry = Telemetry(raw)
         self._action = Action(raw)
         self._offboard = Offboard(raw)

@@ -8,9 +8,9 @@ steps (it then flies what the emulator received, never the declaration).
 
 from __future__ import annotations
 
-from aeroweaver_edge.observation import VehicleState
-from aeroweaver_edge.ports import Health, Vehicle
-from aeroweaver_edge.wire import VehicleStatus
+from aeroweaver_edge.contracts.observation import VehicleState
+from aeroweaver_edge.contracts.ports import Health, Vehicle
+from aeroweaver_edge.contracts.wire import VehicleStatus
 
 
 class MirroredVehicle:

@@ -23,9 +23,9 @@ from collections import Counter
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from aeroweaver_edge.observation import VehicleState
-from aeroweaver_edge.ports import Health, Percept, RewardEvent, RoundTick
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.observation import VehicleState
+from aeroweaver_edge.contracts.ports import Health, Percept, RewardEvent, RoundTick
+from aeroweaver_edge.contracts.wire import (
     HeaderFactory,
     Keys,
     MsgRef,
@@ -37,7 +37,7 @@ from aeroweaver_edge.wire import (
 )
 
 if TYPE_CHECKING:
-    from aeroweaver_edge.mesh import Mesh, Subscription
+    from aeroweaver_edge.mesh.session import Mesh, Subscription
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 WAITING_FOR_WORLD = "waiting for a simulated world"

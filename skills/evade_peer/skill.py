@@ -13,8 +13,8 @@ import math
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Intent
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import HOLD, Intent
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 from skills._common import allowed, move_and_announce, nearest_first_k, of_kind, visible
 
 NAME = "evade_peer"

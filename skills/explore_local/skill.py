@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import math
 
-from aeroweaver_edge.actions import Intent, MoveTo, Outgoing
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import Intent, MoveTo, Outgoing
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 from skills._common import Scalar, metres
 
 NAME = "explore_local"

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Intent
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import HOLD, Intent
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 from skills._common import allowed, latest_by_target, move_and_announce, point, visible
 
 NAME = "follow_signal"

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import Intent, MoveTo
-from aeroweaver_edge.defaults import ARENA_HALF_M
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import Intent, MoveTo
+from aeroweaver_edge.contracts.defaults import ARENA_HALF_M
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "go_to"
 POINT_KINDS = ("waypoint", "landmark")

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Hold, Intent
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import HOLD, Hold, Intent
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 from skills._common import SYMBOLS, allowed, ciphertexts
 
 NAME = "guess_message"

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from aeroweaver_edge.actions import HOLD, Intent
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import HOLD, Intent
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 
 
 class Params(SkillParams):

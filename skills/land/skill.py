@@ -6,8 +6,8 @@ phases carry out through ``Vehicle.land()`` after the approval check (see skill.
 
 from __future__ import annotations
 
-from aeroweaver_edge.actions import Hold, Intent, VehicleAction
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import Hold, Intent, VehicleAction
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "land"
 

@@ -12,9 +12,9 @@ import math
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import Intent, MoveTo
-from aeroweaver_edge.defaults import ARENA_HALF_M
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import Intent, MoveTo
+from aeroweaver_edge.contracts.defaults import ARENA_HALF_M
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "orbit"
 POINT_KINDS = ("waypoint", "landmark")

@@ -12,8 +12,8 @@ import math
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Intent, MoveTo
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import HOLD, Intent, MoveTo
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 from skills._common import allowed, of_kind, target_report, visible
 
 NAME = "pursue_target"

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from aeroweaver_edge.actions import HOLD, Intent
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import HOLD, Intent
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 from skills._common import allowed, move_and_announce, of_kind, visible
 
 NAME = "take_formation_slot"

@@ -190,7 +190,7 @@ def test_the_daemon_refuses_with_one_line_and_exit_2(tmp_path: Path, line: str) 
     path.write_text(f'uav = "uav0"\n{line}\n', encoding="utf-8")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.run(
-        [sys.executable, "-m", "aeroweaver_edge.cli", "daemon", "--config", str(path)],
+        [sys.executable, "-m", "aeroweaver_edge", "daemon", "--config", str(path)],
         capture_output=True, text=True, timeout=60, env=env, cwd=tmp_path,
     )  # fmt: skip
     assert proc.returncode == 2, proc.stderr
@@ -210,7 +210,7 @@ def test_the_daemon_refuses_with_one_line_and_exit_2(tmp_path: Path, line: str) 
 def test_sim_flags_share_the_bounds(flag: str, value: str) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.run(
-        [sys.executable, "-m", "aeroweaver_edge.cli", "sim", "--selector", "scripted",
+        [sys.executable, "-m", "aeroweaver_edge", "sim", "--selector", "scripted",
          flag, value],
         capture_output=True, text=True, timeout=60, env=env,
     )  # fmt: skip
@@ -234,7 +234,7 @@ def test_an_endpoint_port_out_of_range_is_named(tmp_path: Path, endpoint: str) -
 def test_mission_start_refuses_a_port_beyond_65535() -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.run(
-        [sys.executable, "-m", "aeroweaver_edge.cli", "mission", "start", "--no-llm",
+        [sys.executable, "-m", "aeroweaver_edge", "mission", "start", "--no-llm",
          "--connect", "tcp/127.0.0.1:99999", "Cover the landmarks"],
         capture_output=True, text=True, timeout=60, env=env,
     )  # fmt: skip

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.actions import Hold, Intent, MoveTo
-from aeroweaver_edge.cli_runner import Stopped, forget_early_stops, stop_before_loop
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.contracts.actions import Hold, Intent, MoveTo
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.skill_api import SkillContext
+from aeroweaver_edge.runtime.signals import Stopped, forget_early_stops, stop_before_loop
 from aeroweaver_edge.skills import (
     SkillError,
     SkillParamError,
@@ -52,8 +52,8 @@ Prose for the LLM.
 GOOD_PY = """\
 from __future__ import annotations
 
-from aeroweaver_edge.actions import Intent, MoveTo
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import Intent, MoveTo
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 
 
 class Params(SkillParams):

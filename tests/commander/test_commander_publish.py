@@ -11,9 +11,7 @@ from typing import Any, TypeVar, cast
 import msgspec
 import zenoh
 
-from aeroweaver_edge.mesh import Mesh
-from aeroweaver_edge.mission_state import MissionState
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.wire import (
     Assignment,
     Header,
     HeaderFactory,
@@ -22,6 +20,8 @@ from aeroweaver_edge.wire import (
     Payload,
     ProgressReport,
 )
+from aeroweaver_edge.daemon.mission_state import MissionState
+from aeroweaver_edge.mesh.session import Mesh
 from commander.commander import Commander
 from commander.harness import plan_for_task
 from commander.plan import MissionPlan

@@ -64,7 +64,7 @@ async def test_parse_mission_checks_first_whatever_calls_it() -> None:
 
 def cli(*args: str | bytes) -> subprocess.CompletedProcess[bytes]:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "LC_ALL": "C.UTF-8"}
-    argv = [os.fsencode(sys.executable), b"-m", b"aeroweaver_edge.cli"]
+    argv = [os.fsencode(sys.executable), b"-m", b"aeroweaver_edge"]
     argv += [a if isinstance(a, bytes) else a.encode() for a in args]
     return subprocess.run(argv, capture_output=True, timeout=60, env=env)
 

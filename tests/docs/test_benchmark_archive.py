@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.cli import main
+from aeroweaver_edge.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "benchmark.md"

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.security.keys_dir import SwarmDir
+from aeroweaver_edge.provision.keys_dir import SwarmDir
 from tests.helpers.swarm_procs import uavs_seen
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -112,7 +112,7 @@ def test_the_rehearsal_in_docs_field_md_flies(tmp_path: Path) -> None:
     try:
         for i, (argv, bg) in enumerate(commands):
             own = with_ports(argv, router, vehicle)[1:]
-            cmd = [sys.executable, "-m", "aeroweaver_edge.cli", *own]
+            cmd = [sys.executable, "-m", "aeroweaver_edge", *own]
             log = tmp_path / f"{i:02d}-{argv[1]}.log"
             if bg:
                 with log.open("wb") as fh:

@@ -17,12 +17,12 @@ import msgspec
 import zenoh
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import zenoh_settings
+from aeroweaver_edge.contracts.wire import Codec
+from aeroweaver_edge.mesh.session import zenoh_settings
 from aeroweaver_edge.orchestration.network import RunNetwork
 from aeroweaver_edge.security.identity import SwarmPki
 from aeroweaver_edge.security.pki import load_signing_key
 from aeroweaver_edge.security.signing import Signer
-from aeroweaver_edge.wire import Codec
 
 MUST_CONNECT = {"connect/exit_on_failure": True, "connect/timeout_ms": 2000}
 

@@ -19,12 +19,12 @@ from typing import Any
 
 import pytest
 
-from aeroweaver_edge.actions import Hold, Motion, MoveTo, SetVelocity
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.safety_gate import GatedCommand, SafetyGate
+from aeroweaver_edge.contracts.actions import Hold, Motion, MoveTo, SetVelocity
+from aeroweaver_edge.contracts.wire import Vec3
+from aeroweaver_edge.safety.gate import GatedCommand, SafetyGate
 from aeroweaver_edge.skills import default_root
 from aeroweaver_edge.tasks.base import TaskDefinition
-from aeroweaver_edge.wire import Vec3
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 HOSTILE = Path(__file__).resolve().parent / "hostile_skills"
 HOSTILE_SKILLS = ("ram_peer", "dash_up_and_in", "leave_fence")

@@ -23,12 +23,12 @@ from aeroweaver_edge.config import (
     UavConfig,
     VehicleConfig,
 )
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.contracts.wire import ProgressReport
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.swarm import world_task
-from aeroweaver_edge.run_dir import ENV_PARENT
+from aeroweaver_edge.runtime.run_dir import ENV_PARENT
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
-from aeroweaver_edge.wire import ProgressReport
 from commander.commander import Commander
 from commander.harness import plan_for_task
 from tests.helpers.netlab import Segment
@@ -141,7 +141,7 @@ async def run_ns_swarm(
             env = {**os.environ, ENV_PARENT: str(os.getpid())}
             with run.logs[uav].open("wb") as log:
                 run.procs[uav] = subprocess.Popen(  # noqa: ASYNC220 - spawn only, no wait
-                    [*seg.prefix(), sys.executable, "-m", "aeroweaver_edge.cli", "daemon",
+                    [*seg.prefix(), sys.executable, "-m", "aeroweaver_edge", "daemon",
                      "--config", str(path)],
                     stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env,
                 )  # fmt: skip

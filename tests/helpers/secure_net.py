@@ -16,7 +16,7 @@ from typing import Any
 import zenoh
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh, MeshError, zenoh_settings
+from aeroweaver_edge.mesh.session import Mesh, MeshError, zenoh_settings
 from aeroweaver_edge.security.identity import SwarmPki
 from tests.helpers.zenoh_net import free_port, unique_namespace
 

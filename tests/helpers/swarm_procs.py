@@ -14,8 +14,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh
-from aeroweaver_edge.wire import Keys
+from aeroweaver_edge.contracts.wire import Keys
+from aeroweaver_edge.mesh.session import Mesh
 from tests.helpers.zenoh_net import free_port
 
 TEXT = "Cover the three landmarks with three drones"
@@ -23,7 +23,7 @@ UAVS = ("uav0", "uav1", "uav2")
 
 
 def cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "aeroweaver_edge.cli", *args]
+    return [sys.executable, "-m", "aeroweaver_edge", *args]
 
 
 class Procs:

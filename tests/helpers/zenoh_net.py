@@ -12,8 +12,8 @@ import uuid
 from collections.abc import Callable
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh, MeshError
-from aeroweaver_edge.wire import Codec
+from aeroweaver_edge.contracts.wire import Codec
+from aeroweaver_edge.mesh.session import Mesh, MeshError
 
 
 def free_port() -> int:

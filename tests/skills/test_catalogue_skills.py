@@ -14,11 +14,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from aeroweaver_edge.actions import HOLD, Hold, Intent, MoveTo, Outgoing, VehicleAction
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.contracts.actions import HOLD, Hold, Intent, MoveTo, Outgoing, VehicleAction
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.skill_api import SkillContext
+from aeroweaver_edge.contracts.wire import Entity, Header, InboxMessage
 from aeroweaver_edge.skills import Skill, SkillParamError, SkillRegistry, load_skills
-from aeroweaver_edge.wire import Entity, Header, InboxMessage
 
 TASK_SKILLS = {
     "cover_landmark",

@@ -6,11 +6,11 @@ import math
 
 import pytest
 
-from aeroweaver_edge.actions import HOLD, Hold, Intent, MoveTo, Outgoing
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.contracts.actions import HOLD, Hold, Intent, MoveTo, Outgoing
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.skill_api import SkillContext
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.skills import Skill, SkillRegistry, load_skills
-from aeroweaver_edge.wire import Entity
 
 
 @pytest.fixture(scope="module")

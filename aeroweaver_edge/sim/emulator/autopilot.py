@@ -17,7 +17,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.sim.emulator import ftp, texts
 from aeroweaver_edge.sim.emulator.defaults import ARDUPILOT_PARAMS, PX4_PARAMS, TELEMETRY_S
 from aeroweaver_edge.sim.emulator.telemetry import encode
@@ -27,6 +26,7 @@ from aeroweaver_edge.vehicle.mavlink.personality import (
     PARAM_INT32,
     Personality,
 )
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 R = mavlink  # short alias for the enums
 ACCEPTED: int = R.MAV_RESULT_ACCEPTED

@@ -16,9 +16,9 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.wire import SimCommand, Vec3
 from aeroweaver_edge.sim.emulator.host import EmulatorHost
-from aeroweaver_edge.wire import SimCommand, Vec3
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 log = logging.getLogger(__name__)
 TOLERANCE = 1e-4  # m/s: float32 rounding of the MAVLink setpoint is ~1e-6 here

@@ -94,8 +94,8 @@ async def _serve(opts: EmulatorOptions, faults: list[Faults], status_every: floa
 
 
 def cmd_emulator(args: argparse.Namespace) -> int:
-    from aeroweaver_edge.cli_runner import Stopped
-    from aeroweaver_edge.cli_runner import run_until_signal as _run
+    from aeroweaver_edge.runtime.signals import Stopped
+    from aeroweaver_edge.runtime.signals import run_until_signal as _run
 
     try:
         opts, faults = _options(args)

@@ -20,12 +20,13 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from aeroweaver_edge.kinematics import KinematicWorld
-from aeroweaver_edge.lifecycle import cancel_all
+from aeroweaver_edge.contracts.endpoints import UdpUrl
+from aeroweaver_edge.runtime.lifecycle import cancel_all
 from aeroweaver_edge.sim.emulator.autopilot import EmulatedAutopilot, Faults
 from aeroweaver_edge.vehicle.mavlink.geo import DEFAULT_ORIGIN, GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.personality import personality as make_personality
-from aeroweaver_edge.vehicle.mavlink.udp import Addr, UdpEndpoint, UdpUrl
+from aeroweaver_edge.vehicle.mavlink.udp import Addr, UdpEndpoint
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 log = logging.getLogger(__name__)
 TICK_S = 0.01

@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 
 from aeroweaver_edge.config import SimConfig, VehicleConfig
+from aeroweaver_edge.contracts.endpoints import UdpUrl
 from aeroweaver_edge.sim.emulator.bridge import EmulatorBridge
 from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
 from aeroweaver_edge.tasks.base import TaskDefinition
 from aeroweaver_edge.vehicle.mavlink.commands import command_name
-from aeroweaver_edge.vehicle.mavlink.udp import UdpEndpoint, UdpUrl
+from aeroweaver_edge.vehicle.mavlink.udp import UdpEndpoint
 
 TIME_SCALE = 5.0  # take-off and landing run 5x faster than real time (physics is lockstep)
 

@@ -3,20 +3,54 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 from aeroweaver_edge.vehicle.mavlink.codec import Message
 from aeroweaver_edge.vehicle.mavlink.codec import mavlink as R
+from aeroweaver_edge.vehicle.mavlink.geo import GeoOrigin
+from aeroweaver_edge.vehicle.mavlink.personality import Personality
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
-if TYPE_CHECKING:
-    from aeroweaver_edge.sim.emulator.autopilot import EmulatedAutopilot
+
+class _FaultSwitches(Protocol):
+    no_autopilot_version: bool
+
+
+class TelemetrySource(Protocol):
+    """What the encoders read of an emulated autopilot (``autopilot.EmulatedAutopilot``)."""
+
+    sysid: int
+    uav: str
+    p: Personality
+    origin: GeoOrigin
+    alt: float  # metres above home
+    vz: float
+    home: tuple[float, float]
+    fence: list[Message]
+    breached: bool
+
+    @property
+    def faults(self) -> _FaultSwitches: ...
+
+    @property
+    def landed(self) -> int: ...
+
+    @property
+    def mav(self) -> Any: ...
+
+    @property
+    def world(self) -> KinematicWorld: ...
+
+    def boot_ms(self) -> int: ...
+
+    def param(self, name: str) -> float: ...
 
 
 # ArduPilot FENCE_TYPE bits: max altitude, circle, polygon (uploaded zones), min altitude.
 FENCE_ALT_MAX, FENCE_CIRCLE, FENCE_POLYGON, FENCE_ALT_MIN = 1, 2, 4, 8
 
 
-def fence_bits(ap: EmulatedAutopilot) -> tuple[bool, bool, bool]:
+def fence_bits(ap: TelemetrySource) -> tuple[bool, bool, bool]:
     """MAV_SYS_STATUS_GEOFENCE (present, enabled, healthy) as the autopilot reports it.
 
     ArduPilot (``AC_Fence::sys_status_*`` and ``GCS_MAVLINK::update_sensor_status_flags``):
@@ -37,7 +71,7 @@ def fence_bits(ap: EmulatedAutopilot) -> tuple[bool, bool, bool]:
     return present, enabled, healthy
 
 
-def encode(ap: EmulatedAutopilot, msg_id: int) -> Message | None:
+def encode(ap: TelemetrySource, msg_id: int) -> Message | None:
     """The telemetry message ``msg_id`` as the autopilot would send it now (None: not one
     it sends)."""
     m = ap.mav

@@ -3,5 +3,5 @@
 No ``mavutil`` and no threads: datagrams are fed to the codec from an asyncio protocol, and
 every timer (heartbeat, setpoint stream, watchdog, retries) is a task on the same loop, so a
 stalled loop stops the setpoint stream and the autopilot's offboard-loss failsafe fires
-(notes/mavlink.md). The emulator in ``aeroweaver_edge.sim.emulator`` shares this codec.
+(docs/notes/mavlink.md). The emulator in ``aeroweaver_edge.sim.emulator`` shares this codec.
 """

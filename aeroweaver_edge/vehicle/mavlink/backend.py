@@ -19,9 +19,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from aeroweaver_edge.lifecycle import cancel_all
-from aeroweaver_edge.observation import VehicleState
-from aeroweaver_edge.ports import Health
+from aeroweaver_edge.contracts.endpoints import UdpUrl
+from aeroweaver_edge.contracts.observation import VehicleState
+from aeroweaver_edge.contracts.ports import Health
+from aeroweaver_edge.contracts.wire import VehicleStatus
+from aeroweaver_edge.runtime.lifecycle import cancel_all
 from aeroweaver_edge.vehicle.errors import VehicleError
 from aeroweaver_edge.vehicle.mavlink.codec import Message, mavlink
 from aeroweaver_edge.vehicle.mavlink.commands import CommandClient, CommandError
@@ -43,8 +45,6 @@ from aeroweaver_edge.vehicle.mavlink.signing import (
     timestamp_path,
 )
 from aeroweaver_edge.vehicle.mavlink.stream import ZERO_VELOCITY, Setpoint, SetpointStream
-from aeroweaver_edge.vehicle.mavlink.udp import UdpUrl
-from aeroweaver_edge.wire import VehicleStatus
 
 if TYPE_CHECKING:
     from aeroweaver_edge.config import SafetyConfig, VehicleConfig

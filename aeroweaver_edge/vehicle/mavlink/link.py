@@ -17,7 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from aeroweaver_edge.lifecycle import cancel_all
+from aeroweaver_edge.contracts.endpoints import UdpUrl
+from aeroweaver_edge.runtime.lifecycle import cancel_all
 from aeroweaver_edge.vehicle.mavlink.codec import (
     AUTOPILOT_COMPID,
     COMPANION_COMPID,
@@ -25,7 +26,7 @@ from aeroweaver_edge.vehicle.mavlink.codec import (
     Message,
     mavlink,
 )
-from aeroweaver_edge.vehicle.mavlink.udp import Addr, UdpEndpoint, UdpUrl
+from aeroweaver_edge.vehicle.mavlink.udp import Addr, UdpEndpoint
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """What differs between PX4 and ArduPilot (Copter): mode numbers, how each action is
 commanded, how integer parameters travel, and which failsafe parameters to check.
 
-Facts from notes/mavlink.md and notes/safety.md. Both the daemon's backend and the vehicle
+Facts from docs/notes/mavlink.md and docs/notes/safety.md. Both the daemon's backend and the vehicle
 emulator read these tables, so a wrong number here fails the MAVSDK conformance test, which
 maps modes independently.
 """

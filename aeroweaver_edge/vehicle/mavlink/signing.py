@@ -22,6 +22,9 @@ KEY_BYTES = 32
 class SigningError(ValueError):
     """The key file is missing, malformed or too widely readable."""
 
+    def explain(self) -> tuple[int, str]:
+        return 2, f"signing: {self}"
+
 
 def now_timestamp() -> int:
     return int((time.time() - EPOCH_2015) * 100_000)

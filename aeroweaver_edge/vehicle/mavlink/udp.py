@@ -10,41 +10,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Literal
-from urllib.parse import urlsplit
+
+from aeroweaver_edge.contracts.endpoints import UdpUrl
 
 Addr = tuple[str, int]
-
-
-@dataclass(frozen=True)
-class UdpUrl:
-    mode: Literal["udpin", "udpout"]
-    host: str
-    port: int
-
-    @classmethod
-    def parse(cls, url: str) -> UdpUrl:
-        """``udpin://0.0.0.0:14540`` or ``udpout://127.0.0.1:14580``; anything else is a
-        ``ValueError`` that names the problem."""
-        parts = urlsplit(url)
-        if parts.scheme not in ("udpin", "udpout"):
-            raise ValueError(
-                f"{url!r}: scheme must be udpin:// or udpout:// (got {parts.scheme!r})"
-            )
-        try:
-            port = parts.port
-        except ValueError:
-            port = None
-        if not parts.hostname or port is None or not 0 <= port <= 65535:
-            raise ValueError(f"{url!r}: expected HOST:PORT with a port 0-65535")
-        if parts.scheme == "udpout" and port == 0:
-            raise ValueError(f"{url!r}: udpout needs a real destination port")
-        mode: Literal["udpin", "udpout"] = "udpin" if parts.scheme == "udpin" else "udpout"
-        return cls(mode, parts.hostname, port)
-
-    def __str__(self) -> str:
-        return f"{self.mode}://{self.host}:{self.port}"
 
 
 class _Protocol(asyncio.DatagramProtocol):

@@ -5,10 +5,10 @@ from __future__ import annotations
 import pytest
 
 from aeroweaver_edge.agent.candidates import LABELS, build_candidates
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.skill_api import SkillContext
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.skills import SkillRegistry, load_skills
-from aeroweaver_edge.wire import Entity
 
 CTX = SkillContext(uav="uav0", uav_index=0, role="searcher", task="coverage")
 # cover_landmark offers the nearest eight landmarks by default; the budget tests need more.

@@ -11,11 +11,11 @@ import pytest
 
 from aeroweaver_edge.agent import choices
 from aeroweaver_edge.agent.estimators import ENV_ESTIMATOR, Estimator
-from aeroweaver_edge.agent.memory import AsyncExperienceMemory
+from aeroweaver_edge.agent.memory.async_memory import AsyncExperienceMemory
 from aeroweaver_edge.agent.scripted import ENV_BASE, Base, DegradedScorer
-from aeroweaver_edge.app import open_selector
-from aeroweaver_edge.cli import main
+from aeroweaver_edge.cli.main import main
 from aeroweaver_edge.config import AgentConfig, ConfigError, UavConfig, load_config
+from aeroweaver_edge.daemon.app import open_selector
 
 
 @pytest.fixture(autouse=True)

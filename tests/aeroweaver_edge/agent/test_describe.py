@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from aeroweaver_edge.agent.describe import describe, describe_state
 from aeroweaver_edge.agent.state_tokens import tokenise
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.wire import Entity
 
 
 def observation(entities: tuple[Entity, ...]) -> Observation:

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.agent import memory as memory_mod
 from aeroweaver_edge.agent.estimators import (
     ENV_ESTIMATOR,
     PAPER,
@@ -18,10 +17,12 @@ from aeroweaver_edge.agent.estimators import (
     HorizonBook,
     estimator_from_env,
 )
-from aeroweaver_edge.agent.memory import AsyncExperienceMemory, ExperienceMemory
+from aeroweaver_edge.agent.memory import experience as memory_mod
+from aeroweaver_edge.agent.memory.async_memory import AsyncExperienceMemory
+from aeroweaver_edge.agent.memory.experience import ExperienceMemory
 from aeroweaver_edge.config import AgentConfig
-from aeroweaver_edge.errors import UserError
-from aeroweaver_edge.wire import ExperienceRecord, Header
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.contracts.wire import ExperienceRecord, Header
 
 T, R = "coverage", "searcher"
 GAMMA = 0.9

@@ -11,12 +11,12 @@ from aeroweaver_edge.agent.llm_selector import LLMSelector
 from aeroweaver_edge.agent.prompt import HISTORY_HEADER, OPTIONS_HEADER, build_messages
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest, Selector
+from aeroweaver_edge.contracts.wire import InboxMessage
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.llm.fake_provider import QUIRKS, FakeProvider, Policy
 from aeroweaver_edge.llm.probe import ProbeResult, probe_endpoint
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.ports import Candidate, DecisionRequest, Selector
-from aeroweaver_edge.wire import InboxMessage
 
 CANDIDATES = [
     Candidate("A", "cover_landmark", {"target_id": "L1"}, "cover_landmark(target_id=L1)"),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from aeroweaver_edge.agent.candidates import seeded_order
-from aeroweaver_edge.orchestration.variants import with_full_catalogue, with_seeded_order
+from aeroweaver_edge.orchestration.planning import with_full_catalogue, with_seeded_order
 from commander.harness import plan_for_task
 
 

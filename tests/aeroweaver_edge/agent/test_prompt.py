@@ -20,10 +20,10 @@ from aeroweaver_edge.agent.prompt import (
     option_text,
 )
 from aeroweaver_edge.agent.state_text import message_summary
-from aeroweaver_edge.bench.fuzz_wire import EVIL_FLOATS, EVIL_INTS
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.ports import Candidate, DecisionRequest
-from aeroweaver_edge.wire import Entity, Header, InboxMessage
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
+from aeroweaver_edge.contracts.wire import Entity, Header, InboxMessage
+from aeroweaver_lab.bench.fuzz_wire import EVIL_FLOATS, EVIL_INTS
 
 CANDIDATES = [
     Candidate("A", "cover_landmark", {"target_id": "L1"}, "cover_landmark(target_id=L1)"),

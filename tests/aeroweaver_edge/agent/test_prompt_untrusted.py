@@ -12,12 +12,12 @@ from pathlib import Path
 
 from aeroweaver_edge.agent.llm_selector import LLMSelector
 from aeroweaver_edge.agent.prompt import OPTIONS_HEADER, build_messages, quote_data
-from aeroweaver_edge.baselines.protocol import Mission, central_system
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 from aeroweaver_edge.tasks import get_spec
+from aeroweaver_lab.baselines.protocol import Mission, central_system
 from tests.aeroweaver_edge.agent.test_prompt import request
 
 HOSTILE = (
@@ -91,7 +91,7 @@ async def test_trace_options_are_the_lines_the_prompt_shows(tmp_path: Path) -> N
         )  # fmt: skip
         await run_swarm(opts)
         prompts = [m["content"] for b in fp.chat_bodies() for m in b["messages"]]
-    from aeroweaver_edge.bench.episodes import read_trace
+    from aeroweaver_lab.bench.episodes import read_trace
 
     shown = {line for p in prompts for line in p.splitlines()}
     checked = 0

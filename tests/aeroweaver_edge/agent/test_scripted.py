@@ -12,11 +12,11 @@ import pytest
 from aeroweaver_edge.agent.candidates import build_candidates
 from aeroweaver_edge.agent.scoring import LabelScores, choose
 from aeroweaver_edge.agent.scripted import ReferenceScorer
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.ports import DecisionRequest
-from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.ports import DecisionRequest
+from aeroweaver_edge.contracts.skill_api import SkillContext
+from aeroweaver_edge.contracts.wire import Entity, Header, InboxMessage, Vec3
 from aeroweaver_edge.skills import SkillRegistry, load_skills
-from aeroweaver_edge.wire import Entity, Header, InboxMessage, Vec3
 
 CTX = SkillContext(uav="uav0", uav_index=0, role="searcher", task="coverage")
 ACTIVE = ["cover_landmark", "explore_local", "return_in_bounds", "hold_position"]

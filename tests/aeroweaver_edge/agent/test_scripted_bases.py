@@ -13,7 +13,6 @@ from aeroweaver_edge.agent.candidates import build_candidates
 from aeroweaver_edge.agent.scripted import (
     ENV_BASE,
     HOLD_BIAS,
-    NOISE_SD,
     POSITION_BIAS,
     Base,
     DegradedScorer,
@@ -21,11 +20,12 @@ from aeroweaver_edge.agent.scripted import (
     scorer_for,
     scorer_from_env,
 )
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.ports import DecisionRequest
-from aeroweaver_edge.skill_api import SkillContext
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.ports import DecisionRequest
+from aeroweaver_edge.contracts.selector_specs import NOISE_SD
+from aeroweaver_edge.contracts.skill_api import SkillContext
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.skills import load_skills
-from aeroweaver_edge.wire import Entity
 
 CTX = SkillContext(uav="uav0", uav_index=0, role="searcher", task="coverage")
 ACTIVE = ["cover_landmark", "explore_local", "return_in_bounds", "hold_position"]

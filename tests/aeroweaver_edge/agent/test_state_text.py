@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from aeroweaver_edge.agent.state_text import MAX_MESSAGES, message_summary, state_text
 from aeroweaver_edge.agent.state_tokens import jaccard, tokenise
-from aeroweaver_edge.observation import MissionView, Observation, VehicleState
-from aeroweaver_edge.wire import Entity, Header, InboxMessage
+from aeroweaver_edge.contracts.observation import MissionView, Observation, VehicleState
+from aeroweaver_edge.contracts.wire import Entity, Header, InboxMessage
 
 VIEW = MissionView(
     mission_id="m1",

@@ -84,7 +84,7 @@ class Procs:
         self._logs.append(out)
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "aeroweaver_edge.cli", *args,
+            sys.executable, "-m", "aeroweaver_edge", *args,
             stdout=out, stderr=asyncio.subprocess.STDOUT, env=env, cwd=self.root,
         )  # fmt: skip
         self.procs[name] = proc

@@ -18,7 +18,7 @@ from aeroweaver_edge.console.field import FieldView
 from aeroweaver_edge.console.frames import FrameStore, encode
 from aeroweaver_edge.console.observer import SwarmObserver
 from aeroweaver_edge.console.server import Console
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.wire import (
     Codec,
     Entity,
     Header,

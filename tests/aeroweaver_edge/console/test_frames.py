@@ -12,11 +12,11 @@ import pytest
 from aeroweaver_edge.config import MAX_UAVS, SimConfig
 from aeroweaver_edge.console.frames import FrameStore
 from aeroweaver_edge.console.observer import SwarmObserver
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.contracts.wire import MAX_PAYLOAD_BYTES, Codec, Header, MsgRef, WorldSnapshot
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.planning import uav_ids
 from aeroweaver_edge.orchestration.swarm import SwarmHandle, SwarmOptions, run_swarm, world_task
 from aeroweaver_edge.tasks import TASK_NAMES
-from aeroweaver_edge.wire import MAX_PAYLOAD_BYTES, Codec, Header, MsgRef, WorldSnapshot
 from commander.harness import plan_for_task
 
 

@@ -1,7 +1,7 @@
 """The embedded llama.cpp server: clear errors when absent, and a structure-only smoke test.
 
 The smoke test never asserts specific choices or values: SmolLM2-135M has no judgement
-and logprobs differ across backends and cache states (notes/llm.md).
+and logprobs differ across backends and cache states (docs/notes/llm.md).
 """
 
 from __future__ import annotations
@@ -18,15 +18,15 @@ from aeroweaver_edge.agent.llm_selector import LLMSelector
 from aeroweaver_edge.agent.prompt import prefix_messages
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.contracts.observation import MissionView, Observation, VehicleState
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
 from aeroweaver_edge.llm import embedded
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.llm.cpus import usable_cpus
 from aeroweaver_edge.llm.embedded import EmbeddedServer, EmbeddedUnavailable, shared_server
 from aeroweaver_edge.llm.probe import PROBE_LABELS, probe_endpoint
 from aeroweaver_edge.llm.slot_seed import SlotGroup, seed_slots
-from aeroweaver_edge.observation import MissionView, Observation, VehicleState
-from aeroweaver_edge.ports import Candidate, DecisionRequest
 
 
 def test_threads_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:

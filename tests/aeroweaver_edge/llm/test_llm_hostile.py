@@ -14,7 +14,6 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.agent.llm_selector import LLMSelector
-from aeroweaver_edge.baselines.json_chat import JsonMode, json_chat
 from aeroweaver_edge.config import LLMConfig
 from aeroweaver_edge.llm.client import (
     MAX_BODY_BYTES,
@@ -25,6 +24,7 @@ from aeroweaver_edge.llm.client import (
 )
 from aeroweaver_edge.llm.logprobs import parse_label_scores
 from aeroweaver_edge.llm.probe import probe_endpoint
+from aeroweaver_lab.baselines.json_chat import JsonMode, json_chat
 from tests.aeroweaver_edge.agent.test_llm_selector import request
 from tests.helpers.scripted_http import Reply, ScriptedHttp, nested_json
 
@@ -115,7 +115,7 @@ def test_probe_of_a_nested_answer_exits_with_bad_response_not_a_traceback() -> N
     async def serve_and_probe() -> subprocess.CompletedProcess[str]:
         async with ScriptedHttp([Reply(200, nested_json(100_000))]) as srv:
             proc = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "aeroweaver_edge.cli", "probe", "--llm", srv.base_url,
+                sys.executable, "-m", "aeroweaver_edge", "probe", "--llm", srv.base_url,
                 "--model", "m", stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
                 env={**os.environ, "PYTHONPATH": str(ROOT)},
             )  # fmt: skip
@@ -236,7 +236,7 @@ def test_the_cli_under_v_prints_no_url_secrets() -> None:
         async with ScriptedHttp([Reply.json(200, completion("A", {"A": -0.1}))]) as srv:
             url = f"http://alice:{SECRET_PW}@127.0.0.1:{srv.port}/v1?key={SECRET_KEY}"
             proc = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "aeroweaver_edge.cli", "-v", "probe", "--llm", url,
+                sys.executable, "-m", "aeroweaver_edge", "-v", "probe", "--llm", url,
                 "--model", "m", stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
                 env={**os.environ, "PYTHONPATH": str(ROOT)},
             )  # fmt: skip

@@ -11,12 +11,12 @@ import pytest
 from aeroweaver_edge.agent.llm_selector import LLMSelector
 from aeroweaver_edge.agent.scoring import choose
 from aeroweaver_edge.config import LLMConfig
+from aeroweaver_edge.contracts.observation import Observation, VehicleState
+from aeroweaver_edge.contracts.ports import Candidate, DecisionRequest
 from aeroweaver_edge.llm.client import ChatClient
 from aeroweaver_edge.llm.fake_provider import QUIRKS, FakeProvider, Policy
 from aeroweaver_edge.llm.probe import EXIT_STATUS, ProbeResult, probe_endpoint
-from aeroweaver_edge.observation import Observation, VehicleState
-from aeroweaver_edge.ports import Candidate, DecisionRequest
-from aeroweaver_edge.redact import redact_url
+from aeroweaver_edge.runtime.redact import redact_url
 
 CANDIDATES = [
     Candidate("A", "cover_landmark", {"target_id": "L1"}, "cover_landmark(target_id=L1)"),

@@ -21,7 +21,7 @@ import httpx
 import numpy as np
 import pytest
 
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
 from aeroweaver_edge.llm import embedded, weights
 from aeroweaver_edge.llm.embedded import EmbeddedServer
 

@@ -10,7 +10,7 @@ from mcp import Client
 from mcp.server.mcpserver.exceptions import ToolError
 
 from aeroweaver_edge.config import ConfigError
-from aeroweaver_edge.errors import UserError
+from aeroweaver_edge.contracts.errors import UserError
 from aeroweaver_edge.mcp_server.errors import AgentServer
 from tests.aeroweaver_edge.mcp_server.test_mcp import error
 

@@ -20,7 +20,7 @@ from mcp.client.stdio import StdioServerParameters
 
 from aeroweaver_edge.config import AgentConfig, MeshConfig, UavConfig
 from aeroweaver_edge.mcp_server.server import McpOptions, serve
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from tests.helpers.zenoh_net import free_port, unique_namespace
 
@@ -218,7 +218,7 @@ async def test_mcp_over_stdio_is_read_only_without_a_token(swarm: MeshConfig) ->
     env = {k: v for k, v in os.environ.items() if k != "AEROWEAVER_OPERATOR_TOKEN"}
     params = StdioServerParameters(
         command=sys.executable,
-        args=["-m", "aeroweaver_edge.cli", "mcp", "--swarm", SWARM, "--connect",
+        args=["-m", "aeroweaver_edge", "mcp", "--swarm", SWARM, "--connect",
               swarm.connect[0], "--namespace", str(swarm.namespace)],
         env=env,
     )  # fmt: skip

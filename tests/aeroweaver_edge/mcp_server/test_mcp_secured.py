@@ -18,7 +18,7 @@ import pytest
 from mcp import Client
 from mcp.client.stdio import StdioServerParameters
 
-from aeroweaver_edge.cli import main
+from aeroweaver_edge.cli.main import main
 from aeroweaver_edge.config import AgentConfig, UavConfig, load_config
 from aeroweaver_edge.orchestration.daemons import DaemonSet
 from aeroweaver_edge.security.identity import SwarmPki, default_members
@@ -70,7 +70,7 @@ def mcp_server(s: Secured, *extra: str, token: str | None = TOKEN) -> StdioServe
         env["AEROWEAVER_OPERATOR_TOKEN"] = token
     return StdioServerParameters(
         command=sys.executable,
-        args=["-m", "aeroweaver_edge.cli", "mcp", "--swarm", SWARM, "--keys", str(s.keys),
+        args=["-m", "aeroweaver_edge", "mcp", "--swarm", SWARM, "--keys", str(s.keys),
               "--connect", s.router, *extra],
         env=env,
     )  # fmt: skip
@@ -86,7 +86,7 @@ async def roster_of(client: Client, n: int) -> None:
 
 async def cli(*args: str) -> tuple[int, str, str]:
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "aeroweaver_edge.cli", *args,
+        sys.executable, "-m", "aeroweaver_edge", *args,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )  # fmt: skip
     out, err = await asyncio.wait_for(proc.communicate(), 60)

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import asyncio
 
+from aeroweaver_edge.contracts.wire import Header, ProgressReport
 from aeroweaver_edge.orchestration.barrier import ExperienceBarrier
-from aeroweaver_edge.wire import Header, ProgressReport
 
 ROLES = {"uav0": "searcher", "uav1": "searcher", "uav2": "searcher", "uav3": "leader"}
 ALL = set(ROLES)

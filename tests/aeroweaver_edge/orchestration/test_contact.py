@@ -7,8 +7,8 @@ from __future__ import annotations
 import asyncio
 import time
 
+from aeroweaver_edge.contracts.wire import Keys
 from aeroweaver_edge.orchestration.contact import ContactWatch
-from aeroweaver_edge.wire import Keys
 from tests.helpers.zenoh_net import ZenohNet, eventually
 
 KEYS = Keys("ct")

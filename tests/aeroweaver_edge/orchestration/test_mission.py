@@ -10,7 +10,6 @@ from collections.abc import AsyncIterator
 
 import pytest
 
-from aeroweaver_edge.app import run_daemon
 from aeroweaver_edge.config import (
     AgentConfig,
     ConfigError,
@@ -19,8 +18,9 @@ from aeroweaver_edge.config import (
     SimConfig,
     UavConfig,
 )
-from aeroweaver_edge.errors import UserError
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.daemon.app import run_daemon
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.mission import MissionStartOptions, start_mission
 from aeroweaver_edge.orchestration.swarm import mesh_configs
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.agent.memory_tools import check
+from aeroweaver_edge.agent.memory.tools import check
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.orchestration.swarm import percentiles
 from aeroweaver_edge.sim.runner import RoundLog
 from tests.helpers.netlab import NetLab, Segment
@@ -194,7 +194,7 @@ async def test_a_lossy_slow_link_delays_rounds_but_loses_nothing(
 ROUTER = """
 import asyncio, sys, time
 import zenoh
-import aeroweaver_edge.mesh as mesh_mod
+import aeroweaver_edge.mesh.session as mesh_mod
 from aeroweaver_edge.config import MeshConfig
 
 async def main() -> None:
@@ -222,7 +222,7 @@ asyncio.run(main())
 CLIENT = """
 import asyncio, sys
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.mesh.session import Mesh
 
 async def main() -> None:
     mesh = await Mesh.open(

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.bench.orphans import children, running
 from aeroweaver_edge.config import AgentConfig, MeshConfig, UavConfig, VehicleConfig
-from aeroweaver_edge.run_dir import LOCK_NAME, OWNER_NAME, sweep_stale
+from aeroweaver_edge.runtime.run_dir import LOCK_NAME, OWNER_NAME, sweep_stale
+from aeroweaver_lab.bench.orphans import children, running
 from tests.helpers.zenoh_net import free_port, unique_namespace
 
 pytestmark = pytest.mark.slow
@@ -34,7 +34,7 @@ EXIT_BOUND_S = 30.0  # detection (ms: the TCP links close) + grace + shutdown, o
 def cli(*args: str, tmpdir: Path, **kw: object) -> subprocess.Popen[str]:
     env = {**os.environ, "TMPDIR": str(tmpdir), "PYTHONUNBUFFERED": "1"}
     return subprocess.Popen(
-        [sys.executable, "-m", "aeroweaver_edge.cli", *args],
+        [sys.executable, "-m", "aeroweaver_edge", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

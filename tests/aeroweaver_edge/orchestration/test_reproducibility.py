@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from aeroweaver_edge.inbox import POSITION_MEMORY
+from aeroweaver_edge.mesh.inbox import POSITION_MEMORY
 from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
 
 EPISODES = 3
@@ -107,7 +107,7 @@ def test_the_same_seed_twice_gives_the_same_rounds_across_episodes(tmp_path: Pat
     so whether ``follow_peer(evader0)`` was offered depended on thread timing (before the
     fix, 11 CLI runs of 4 episodes gave 8 different traces). No refusal, no missing
     message either."""
-    from aeroweaver_edge.cli import main
+    from aeroweaver_edge.cli.main import main
 
     assert int(SAME_SEED.split("--rounds ")[1]) > POSITION_MEMORY
     runs = []

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.agent.memory_tools import check_file
+from aeroweaver_edge.agent.memory.tools import check_file
 
 pytestmark = pytest.mark.slow
 
@@ -31,7 +31,7 @@ def test_a_daemon_exiting_at_start_up_fails_the_run_at_once(tmp_path: Path) -> N
     env = {**os.environ, "TMPDIR": str(run_tmp), "PYTHONUNBUFFERED": "1"}
     started = time.monotonic()
     args = [
-        sys.executable, "-m", "aeroweaver_edge.cli", "sim", "--processes",
+        sys.executable, "-m", "aeroweaver_edge", "sim", "--processes",
         "--uavs", str(UAVS), "--rounds", "3", "--selector", "scripted",
         "--memory-dir", str(memory), "--quiet",
     ]  # fmt: skip

@@ -134,7 +134,7 @@ def _aeroweaver() -> list[str]:
     if script.exists():
         return [str(script)]
     found = shutil.which("aeroweaver")
-    return [found] if found else [sys.executable, "-m", "aeroweaver_edge.cli"]
+    return [found] if found else [sys.executable, "-m", "aeroweaver_edge"]
 
 
 def _cli_sim(tmp_path: Path, out: Path, *extra: str) -> dict[str, Any]:

@@ -19,12 +19,12 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.config import LLMConfig, SafetyConfig
-from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
 from aeroweaver_edge.orchestration.swarm import RunSummary, SwarmOptions, run_swarm
-from aeroweaver_edge.safety_gate import SafetyGate
+from aeroweaver_edge.safety.gate import SafetyGate
 from aeroweaver_edge.sim.runner import RoundLog
 from aeroweaver_edge.skills import SKILLS_DIR_ENV
+from aeroweaver_edge.world.kinematics import KinematicWorld
 from commander.plan import MissionPlan, UavAssignment
 from commander.progress import ProgressBoard
 from tests.helpers.envelope import hostile_skills_root, pass_through, record_worlds

@@ -78,7 +78,7 @@ async def test_a_reassignment_mid_mission_is_picked_up_by_the_running_daemons() 
 
 def test_operator_stop_ends_the_run_cleanly(tmp_path: os.PathLike[str]) -> None:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "aeroweaver_edge.cli", "sim", "coverage", "--selector", "scripted",
+        [sys.executable, "-m", "aeroweaver_edge", "sim", "coverage", "--selector", "scripted",
          "--episodes", "200"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
         env={**os.environ, "PYTHONUNBUFFERED": "1"},

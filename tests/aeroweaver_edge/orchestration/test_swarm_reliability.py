@@ -14,11 +14,11 @@ from typing import Any
 import pytest
 from rich.console import Console
 
-from aeroweaver_edge.agent.memory import ExperienceMemory
-from aeroweaver_edge.agent.memory_tools import check, export_rows, memory_files, stats
+from aeroweaver_edge.agent.memory.experience import ExperienceMemory
+from aeroweaver_edge.agent.memory.tools import check, export_rows, memory_files, stats
 from aeroweaver_edge.config import LLMConfig
-from aeroweaver_edge.errors import RunFailed
-from aeroweaver_edge.hold_reasons import HOLD_CAUSES
+from aeroweaver_edge.contracts.errors import RunFailed
+from aeroweaver_edge.contracts.hold_reasons import HOLD_CAUSES
 from aeroweaver_edge.llm.fake_provider import FakeProvider, Policy
 from aeroweaver_edge.orchestration.swarm import RunSummary, SwarmOptions, run_swarm, write_json
 from aeroweaver_edge.orchestration.view import LiveView

@@ -7,8 +7,8 @@ import io
 
 from rich.console import Console
 
+from aeroweaver_edge.contracts.wire import HeaderFactory, ProgressReport
 from aeroweaver_edge.orchestration.view import FieldView
-from aeroweaver_edge.wire import HeaderFactory, ProgressReport
 
 
 def report(uav: str, rnd: int, **kw: object) -> ProgressReport:

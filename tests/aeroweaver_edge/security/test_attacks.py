@@ -38,13 +38,7 @@ import pytest
 import zenoh
 from rich.console import Console
 
-from aeroweaver_edge.orchestration.daemons import DaemonSet
-from aeroweaver_edge.orchestration.network import RunNetwork
-from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
-from aeroweaver_edge.orchestration.view import LiveView, print_summary
-from aeroweaver_edge.security.identity import SwarmPki, default_members
-from aeroweaver_edge.sim.runner import RoundLog
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.wire import (
     Assignment,
     Header,
     InboxMessage,
@@ -56,6 +50,12 @@ from aeroweaver_edge.wire import (
     SimReward,
     StateBeacon,
 )
+from aeroweaver_edge.orchestration.daemons import DaemonSet
+from aeroweaver_edge.orchestration.network import RunNetwork
+from aeroweaver_edge.orchestration.swarm import SwarmOptions, run_swarm
+from aeroweaver_edge.orchestration.view import LiveView, print_summary
+from aeroweaver_edge.security.identity import SwarmPki, default_members
+from aeroweaver_edge.sim.runner import RoundLog
 from tests.helpers.attacker import Attacker, open_raw
 from tests.helpers.secure_net import Tap
 

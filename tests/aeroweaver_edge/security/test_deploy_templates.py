@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.cli import main
+from aeroweaver_edge.cli.main import main
 from aeroweaver_edge.config import UavConfig, load_config
 
 REPO = Path(__file__).resolve().parents[3]

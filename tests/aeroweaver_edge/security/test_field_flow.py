@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.cli import main
+from aeroweaver_edge.cli.main import main
 from aeroweaver_edge.config import MeshConfig
 from aeroweaver_edge.security.identity import SwarmPki
 from tests.helpers.swarm_procs import uavs_seen
@@ -27,7 +27,7 @@ TEXT = "Send the secret symbol to the receiver with two drones; the eavesdropper
 def spawn(*args: str, log: Path) -> subprocess.Popen[bytes]:
     with log.open("wb") as out:
         return subprocess.Popen(
-            [sys.executable, "-m", "aeroweaver_edge.cli", *args],
+            [sys.executable, "-m", "aeroweaver_edge", *args],
             stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
         )  # fmt: skip
 

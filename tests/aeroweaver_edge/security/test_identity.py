@@ -12,10 +12,10 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from aeroweaver_edge.config import MeshConfig
-from aeroweaver_edge.mesh import load_mesh_security
+from aeroweaver_edge.mesh.session import load_mesh_security
 from aeroweaver_edge.security import pki
 from aeroweaver_edge.security.identity import IdentityList, SwarmPki, default_members
-from aeroweaver_edge.security.pki import PkiError
+from aeroweaver_edge.security.key_files import PkiError
 from aeroweaver_edge.security.policy import Role
 from aeroweaver_edge.security.transport import load_security
 

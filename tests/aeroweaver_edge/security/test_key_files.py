@@ -15,8 +15,7 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.security.identity import SwarmPki, default_members
-from aeroweaver_edge.security.key_files import check_private, load_private_key
-from aeroweaver_edge.security.pki import PkiError
+from aeroweaver_edge.security.key_files import PkiError, check_private, load_private_key
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -51,7 +50,7 @@ def uav_toml(pki: SwarmPki, at: Path) -> Path:
 def run_daemon(config: Path) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.run(
-        [sys.executable, "-m", "aeroweaver_edge.cli", "daemon", "--config", str(config)],
+        [sys.executable, "-m", "aeroweaver_edge", "daemon", "--config", str(config)],
         capture_output=True, text=True, timeout=60, env=env, cwd=config.parent,
     )  # fmt: skip
 

@@ -14,7 +14,7 @@ from aeroweaver_edge.config import (
     endpoint_is_loopback,
     load_config,
 )
-from aeroweaver_edge.mesh import build_zenoh_config
+from aeroweaver_edge.mesh.session import build_zenoh_config
 from aeroweaver_edge.security.identity import SwarmPki
 
 

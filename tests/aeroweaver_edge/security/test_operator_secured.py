@@ -9,12 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from aeroweaver_edge.approval import ApprovalGate
-from aeroweaver_edge.approval_link import ApprovalLink
 from aeroweaver_edge.config import ApprovalConfig
-from aeroweaver_edge.operator import OperatorError, OperatorLink
-from aeroweaver_edge.security.wiring import ephemeral_swarm
-from aeroweaver_edge.wire import HeaderFactory, Keys
+from aeroweaver_edge.contracts.wire import HeaderFactory, Keys
+from aeroweaver_edge.mesh.secured import ephemeral_swarm
+from aeroweaver_edge.safety.approval import ApprovalGate
+from aeroweaver_edge.safety.approval_link import ApprovalLink
+from aeroweaver_edge.safety.operator import OperatorError, OperatorLink
 from commander.commander import Commander
 from commander.harness import plan_for_task
 from tests.helpers.secure_net import SecureNet

@@ -7,9 +7,9 @@ import json
 import pytest
 import zenoh
 
+from aeroweaver_edge.contracts.wire import Keys
 from aeroweaver_edge.security.identity import default_members
 from aeroweaver_edge.security.policy import Authorizer, Role, build_acl
-from aeroweaver_edge.wire import Keys
 
 K = Keys("s")
 MEMBERS = default_members(3)

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import os
 
-from aeroweaver_edge.intake import BudgetLimits, VerifyBudget
-from aeroweaver_edge.peers import PeerLink
+from aeroweaver_edge.contracts.wire import Codec, Header, HeaderFactory, InboxMessage, Keys
+from aeroweaver_edge.mesh.intake import BudgetLimits, VerifyBudget
+from aeroweaver_edge.mesh.peers import PeerLink
 from aeroweaver_edge.security.signing import VERSION
-from aeroweaver_edge.wire import Codec, Header, HeaderFactory, InboxMessage, Keys
 from tests.helpers.secure_net import SecureNet
 from tests.helpers.zenoh_net import eventually
 

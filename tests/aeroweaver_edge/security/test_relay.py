@@ -8,11 +8,11 @@ import asyncio
 
 import zenoh
 
-from aeroweaver_edge.peers import PeerLink
+from aeroweaver_edge.contracts.wire import Codec, Header, HeaderFactory, InboxMessage, Keys
+from aeroweaver_edge.mesh.peers import PeerLink
 from aeroweaver_edge.security.identity import SwarmPki
 from aeroweaver_edge.security.pki import load_signing_key
 from aeroweaver_edge.security.signing import Signer
-from aeroweaver_edge.wire import Codec, Header, HeaderFactory, InboxMessage, Keys
 from tests.helpers.secure_net import SecureNet, Tap, until_delivered
 from tests.helpers.zenoh_net import eventually, free_port
 

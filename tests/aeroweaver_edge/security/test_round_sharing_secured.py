@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import asyncio
 
-from aeroweaver_edge.agent.memory import ExperienceMemory
-from aeroweaver_edge.agent.round_sharing import RoundSharing
-from aeroweaver_edge.agent.shared_intake import SharedIntake
-from aeroweaver_edge.wire import HeaderFactory, Keys
+from aeroweaver_edge.agent.memory.experience import ExperienceMemory
+from aeroweaver_edge.agent.memory.round_sharing import RoundSharing
+from aeroweaver_edge.agent.memory.shared_intake import SharedIntake
+from aeroweaver_edge.contracts.wire import HeaderFactory, Keys
 from tests.aeroweaver_edge.security.conftest import SWARM
 from tests.helpers.secure_net import SecureNet
 

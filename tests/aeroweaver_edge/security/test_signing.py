@@ -5,10 +5,7 @@ from __future__ import annotations
 import msgspec
 import pytest
 
-from aeroweaver_edge.security.identity import SwarmPki
-from aeroweaver_edge.security.pki import load_signing_key, make_signing_key
-from aeroweaver_edge.security.signing import ATTACHMENT_BYTES, Signer, Verifier
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.wire import (
     Assignment,
     Codec,
     ExperienceRecord,
@@ -16,6 +13,9 @@ from aeroweaver_edge.wire import (
     InboxMessage,
     Keys,
 )
+from aeroweaver_edge.security.identity import SwarmPki
+from aeroweaver_edge.security.pki import load_signing_key, make_signing_key
+from aeroweaver_edge.security.signing import ATTACHMENT_BYTES, Signer, Verifier
 
 K = Keys("s")
 

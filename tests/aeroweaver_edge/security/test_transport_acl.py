@@ -17,9 +17,7 @@ import msgspec
 import pytest
 import zenoh
 
-from aeroweaver_edge.mesh import Mesh, MeshError
-from aeroweaver_edge.security.identity import SwarmPki
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.wire import (
     Assignment,
     HeaderFactory,
     InboxMessage,
@@ -29,6 +27,8 @@ from aeroweaver_edge.wire import (
     SimPerception,
     StateBeacon,
 )
+from aeroweaver_edge.mesh.session import Mesh, MeshError
+from aeroweaver_edge.security.identity import SwarmPki
 from tests.helpers.secure_net import SecureNet, Tap, until_delivered
 from tests.helpers.zenoh_net import free_port
 

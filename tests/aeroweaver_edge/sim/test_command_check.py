@@ -11,10 +11,17 @@ import math
 
 import pytest
 
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.wire import (
+    HeaderFactory,
+    Keys,
+    MsgRef,
+    SimCommand,
+    SimPerception,
+    Vec3,
+)
 from aeroweaver_edge.sim.command_check import MAX_REFS, CommandCheck
 from aeroweaver_edge.tasks import create
-from aeroweaver_edge.wire import HeaderFactory, Keys, MsgRef, SimCommand, SimPerception, Vec3
+from aeroweaver_edge.world.kinematics import KinematicWorld
 from tests.aeroweaver_edge.sim.test_runner import KEYS, command, holding, play
 from tests.helpers.zenoh_net import ZenohNet
 

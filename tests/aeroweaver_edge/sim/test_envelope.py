@@ -11,12 +11,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from aeroweaver_edge.actions import Motion, MoveTo, SetVelocity
 from aeroweaver_edge.config import SafetyConfig
-from aeroweaver_edge.safety_gate import SafetyGate
+from aeroweaver_edge.contracts.actions import Motion, MoveTo, SetVelocity
+from aeroweaver_edge.contracts.wire import Vec3
+from aeroweaver_edge.safety.gate import SafetyGate
 from aeroweaver_edge.sim import envelope
 from aeroweaver_edge.sim.envelope import KEEP, EnvelopeCheck
-from aeroweaver_edge.wire import Vec3
 from tests.helpers.envelope import raw_velocity
 
 CFG = SafetyConfig()  # fence +-70 m, altitude 2..60 m, 11 m/s, 2 m
@@ -38,7 +38,7 @@ def test_the_oracle_shares_no_code_with_the_gate() -> None:
     imported = {
         node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module
     } | {a.name for node in ast.walk(tree) if isinstance(node, ast.Import) for a in node.names}
-    assert "aeroweaver_edge.safety_gate" not in imported
+    assert "aeroweaver_edge.safety.gate" not in imported
     assert not any("safety_gate" in m for m in imported)
 
 

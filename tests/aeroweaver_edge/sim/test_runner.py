@@ -13,12 +13,12 @@ from dataclasses import dataclass, field
 import pytest
 
 from aeroweaver_edge.config import SafetyConfig, SimConfig
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.contracts.wire import HeaderFactory, Keys, SimCommand, SimPerception, Vec3
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.sim.episode import EpisodeResult
 from aeroweaver_edge.sim.runner import RoundLog, WorldRunner
 from aeroweaver_edge.tasks import create
 from aeroweaver_edge.tasks.base import TaskDefinition
-from aeroweaver_edge.wire import HeaderFactory, Keys, SimCommand, SimPerception, Vec3
 from tests.helpers.zenoh_net import ZenohNet
 
 SWARM = "rt"

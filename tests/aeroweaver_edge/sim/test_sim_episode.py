@@ -9,12 +9,12 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.wire import InboxMessage, Vec3
 from aeroweaver_edge.sim.episode import Episode
 from aeroweaver_edge.tasks.base import Action, Layout, ReferencePolicy, TaskDefinition
 from aeroweaver_edge.tasks.coverage import Coverage
 from aeroweaver_edge.tasks.spec import RED, RoleSpec, TaskSpec
-from aeroweaver_edge.wire import InboxMessage, Vec3
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 FLAGS = TaskSpec(
     name="flags",

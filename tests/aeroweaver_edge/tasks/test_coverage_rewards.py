@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.tasks.coverage import Coverage, SpreadRewards
 from aeroweaver_edge.tasks.mpe import UnitScale
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 NE = tuple[float, float]
 LANDMARKS: list[NE] = [(-28.0, 24.0), (4.0, 34.0), (32.0, 20.0)]

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from aeroweaver_edge.config import SimConfig
-from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.tasks import UnknownTask, create
 from aeroweaver_edge.tasks.coverage import LANDMARKS_NE, Coverage
 from aeroweaver_edge.tasks.layout import spawn_base
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 
 def world_for(seed: int, n: int = 3) -> tuple[Coverage, KinematicWorld]:

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from aeroweaver_edge import tasks
-from aeroweaver_edge.kinematics import KinematicWorld
 from aeroweaver_edge.tasks.base import TaskDefinition
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 ALL_FACTS = {f for spec in tasks.specs().values() for r in spec.all_roles for f in r.facts}
 

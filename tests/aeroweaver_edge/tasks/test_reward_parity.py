@@ -24,9 +24,9 @@ import numpy as np
 import pytest
 
 from aeroweaver_edge import tasks
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.tasks.base import TaskDefinition
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from aeroweaver_edge.cli import main
+from aeroweaver_edge.cli.main import main
 from aeroweaver_edge.tasks import MPE_NAMES, TASK_NAMES, canonical_task, get_spec
 
 

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 import numpy as np
 import pytest
 
-from aeroweaver_edge.kinematics import KinematicWorld
+from aeroweaver_edge.contracts.wire import Entity
 from aeroweaver_edge.sim.episode import Episode
 from aeroweaver_edge.tasks import create
 from aeroweaver_edge.tasks.base import TaskDefinition
@@ -22,7 +22,7 @@ from aeroweaver_edge.tasks.collection_delivery import CollectionDelivery
 from aeroweaver_edge.tasks.formation import Formation
 from aeroweaver_edge.tasks.guided_navigation import GuidedNavigation
 from aeroweaver_edge.tasks.pursuit_evasion import PursuitEvasion
-from aeroweaver_edge.wire import Entity
+from aeroweaver_edge.world.kinematics import KinematicWorld
 
 JUST_OUT = 3.0 + 1e-9
 NE = tuple[float, float]

@@ -6,9 +6,9 @@ import asyncio
 
 import pytest
 
-from aeroweaver_edge.ports import RoundTick
+from aeroweaver_edge.contracts.ports import RoundTick
+from aeroweaver_edge.contracts.wire import Entity, Header, StateBeacon
 from aeroweaver_edge.vehicle.field import FieldPerception, NoRewards, WallClock
-from aeroweaver_edge.wire import Entity, Header, StateBeacon
 from tests.helpers.mav import emulated
 
 

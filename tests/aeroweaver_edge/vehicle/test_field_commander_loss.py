@@ -1,6 +1,6 @@
 """A field daemon whose Commander disappears holds in the air and waits for it: it neither
 lands nor exits (the simulated world's grace does not apply to it), and a Commander that
-comes back takes over without a new arm or take-off (issue 8; notes/safety.md "Commander
+comes back takes over without a new arm or take-off (issue 8; docs/notes/safety.md "Commander
 loss": hold, RTL only if configured). Real MAVLink bytes to the emulator, real zenoh."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import asyncio
 
 import pytest
 
-from aeroweaver_edge.app import run_daemon
 from aeroweaver_edge.config import AgentConfig, FieldConfig, FieldPoint, UavConfig
-from aeroweaver_edge.decision_round import RoundOutcome
+from aeroweaver_edge.daemon.app import run_daemon
+from aeroweaver_edge.daemon.decision_round import RoundOutcome
 from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
 from commander.commander import Commander
 from commander.harness import plan_for_task

@@ -9,8 +9,8 @@ import contextlib
 
 import pytest
 
-from aeroweaver_edge.app import run_daemon
 from aeroweaver_edge.config import AgentConfig, FieldConfig, FieldPoint, UavConfig
+from aeroweaver_edge.daemon.app import run_daemon
 from aeroweaver_edge.sim.emulator.host import EmulatorHost, EmulatorOptions
 from commander.commander import Commander
 from commander.harness import plan_for_task

@@ -11,10 +11,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from aeroweaver_edge.mesh import Mesh
-from aeroweaver_edge.ports import RewardEvent
-from aeroweaver_edge.vehicle.sim import SimLink
-from aeroweaver_edge.wire import (
+from aeroweaver_edge.contracts.ports import RewardEvent
+from aeroweaver_edge.contracts.wire import (
     Entity,
     HeaderFactory,
     Keys,
@@ -24,6 +22,8 @@ from aeroweaver_edge.wire import (
     SimPerception,
     SimReward,
 )
+from aeroweaver_edge.mesh.session import Mesh
+from aeroweaver_edge.vehicle.sim import SimLink
 from tests.helpers.zenoh_net import ZenohNet, eventually
 
 KEYS = Keys("vs")

@@ -10,9 +10,9 @@ from __future__ import annotations
 import asyncio
 import math
 
-from aeroweaver_edge.mesh import Mesh
+from aeroweaver_edge.contracts.wire import HeaderFactory, Keys, SimEpisode, SimPerception, SimReward
+from aeroweaver_edge.mesh.session import Mesh
 from aeroweaver_edge.vehicle.sim import WORLD, SimLink
-from aeroweaver_edge.wire import HeaderFactory, Keys, SimEpisode, SimPerception, SimReward
 from tests.helpers.zenoh_net import ZenohNet, eventually
 
 K = Keys("tr")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 
-from aeroweaver_edge.actions import HOLD, Intent, SetVelocity
-from aeroweaver_edge.skill_api import Observation, SkillContext, SkillParams
+from aeroweaver_edge.contracts.actions import HOLD, Intent, SetVelocity
+from aeroweaver_edge.contracts.skill_api import Observation, SkillContext, SkillParams
 
 NAME = "dash_up_and_in"
 SPEED_MPS = 155.0
