@@ -107,7 +107,7 @@ TARGETS: tuple[Target, ...] = (
         (
             f"{T}agent/test_scoring.py",
             f"{T}agent/test_llm_selector.py",
-            f"{T}test_decision_round.py",
+            f"{T}daemon/test_decision_round.py",
         ),
         10,
     ),
@@ -121,11 +121,11 @@ TARGETS: tuple[Target, ...] = (
             "aeroweaver_edge/agent/memory/senders.py",
         ),
         (
-            f"{T}agent/test_memory.py",
-            f"{T}agent/test_memory_runs.py",
-            f"{T}agent/test_memory_index.py",
-            f"{T}agent/test_memory_senders.py",
-            f"{T}test_cli_memory.py",
+            f"{T}agent/memory/test_memory.py",
+            f"{T}agent/memory/test_memory_runs.py",
+            f"{T}agent/memory/test_memory_index.py",
+            f"{T}agent/memory/test_memory_senders.py",
+            f"{T}cli/test_cli_memory.py",
         ),
         15,
     ),
@@ -133,8 +133,8 @@ TARGETS: tuple[Target, ...] = (
         "safety_gate",
         ("aeroweaver_edge/safety/gate.py",),
         (
-            f"{T}test_safety_gate.py",
-            f"{T}test_decision_round.py",
+            f"{T}safety/test_safety_gate.py",
+            f"{T}daemon/test_decision_round.py",
             f"{T}sim/test_envelope.py",
             f"{T}orchestration/test_swarm_envelope.py",
             "tests/commander/test_no_flight_authority.py",
@@ -145,11 +145,11 @@ TARGETS: tuple[Target, ...] = (
         "peers+inbox",
         ("aeroweaver_edge/mesh/peers.py", "aeroweaver_edge/mesh/inbox.py"),
         (
-            f"{T}test_peers.py",
-            f"{T}test_peers_limits.py",
-            f"{T}test_peer_memory.py",
+            f"{T}mesh/test_peers.py",
+            f"{T}mesh/test_peers_limits.py",
+            f"{T}mesh/test_peer_memory.py",
             f"{T}security/test_relay.py",
-            f"{T}security/test_wiring.py",
+            f"{T}mesh/test_secured.py",
         ),
         15,
     ),
@@ -157,8 +157,8 @@ TARGETS: tuple[Target, ...] = (
         "decision_round",
         ("aeroweaver_edge/daemon/decision_round.py",),
         (
-            f"{T}test_decision_round.py",
-            f"{T}test_daemon.py",
+            f"{T}daemon/test_decision_round.py",
+            f"{T}daemon/test_daemon.py",
             f"{T}orchestration/test_swarm_envelope.py",
             "tests/commander/test_no_flight_authority.py",
             f"{T}orchestration/test_swarm.py",
@@ -250,19 +250,19 @@ MANDATORY: tuple[tuple[str, str, str, bytes | tuple[bytes, ...], bytes], ...] = 
 # over all mutants and over the others.
 EQUIVALENT: dict[str, str] = {
     "aeroweaver_edge/contracts/scores.py:51:43:>->>=": "leftover mass exactly 1e-12 never occurs",
-    "aeroweaver_edge/agent/memory/experience.py:376:11:if-dropped": (
+    "aeroweaver_edge/agent/memory/store.py:177:11:if-dropped": (
         "sqlite creates the missing file empty, which passes every check: None either way"
     ),
-    "aeroweaver_edge/agent/memory/experience.py:399:15:and-operand-dropped#1": (
+    "aeroweaver_edge/agent/memory/store.py:200:15:and-operand-dropped#1": (
         "only OperationalError says locked/busy/unable to open"
     ),
-    "aeroweaver_edge/agent/memory/experience.py:730:33:and->or": (
+    "aeroweaver_edge/agent/memory/experience.py:634:33:and->or": (
         "a loaded group indexes every row of this run (appends add to it): i is never None"
     ),
-    "aeroweaver_edge/mesh/peers.py:233:27:const 1.0->2.0": (
+    "aeroweaver_edge/mesh/peers.py:237:27:const 1.0->2.0": (
         "collect_inbox's default timeout: every caller passes its own"
     ),
-    "aeroweaver_edge/mesh/peers.py:336:12:call-removed": (
+    "aeroweaver_edge/mesh/peers.py:394:12:call-removed": (
         "_beacon_seen is read only beside a _beacons entry and both are written together:"
         " a departed peer's stale arrival time is never read, the next beacon overwrites it"
     ),
