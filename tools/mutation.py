@@ -121,10 +121,10 @@ TARGETS: tuple[Target, ...] = (
             "aeroweaver_edge/agent/memory/senders.py",
         ),
         (
-            f"{T}agent/memory/test_memory.py",
+            f"{T}agent/memory/test_experience.py",
             f"{T}agent/memory/test_memory_runs.py",
-            f"{T}agent/memory/test_memory_index.py",
-            f"{T}agent/memory/test_memory_senders.py",
+            f"{T}agent/memory/test_index.py",
+            f"{T}agent/memory/test_senders.py",
             f"{T}cli/test_cli_memory.py",
         ),
         15,
@@ -133,7 +133,7 @@ TARGETS: tuple[Target, ...] = (
         "safety_gate",
         ("aeroweaver_edge/safety/gate.py",),
         (
-            f"{T}safety/test_safety_gate.py",
+            f"{T}safety/test_gate.py",
             f"{T}daemon/test_decision_round.py",
             f"{T}sim/test_envelope.py",
             f"{T}orchestration/test_swarm_envelope.py",
@@ -158,7 +158,7 @@ TARGETS: tuple[Target, ...] = (
         ("aeroweaver_edge/daemon/decision_round.py",),
         (
             f"{T}daemon/test_decision_round.py",
-            f"{T}daemon/test_daemon.py",
+            f"{T}daemon/test_uav_daemon.py",
             f"{T}orchestration/test_swarm_envelope.py",
             "tests/commander/test_no_flight_authority.py",
             f"{T}orchestration/test_swarm.py",

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.aeroweaver_edge.cli.test_cli import aeroweaver
+from tests.aeroweaver_edge.cli.test_main import aeroweaver
 
 
 def cases(tmp: Path, busy: int) -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:

@@ -24,7 +24,7 @@ from aeroweaver_edge.runtime.systemd_notify import (
     Watchdog,
     watchdog_interval_s,
 )
-from tests.aeroweaver_edge.cli.test_cli import aeroweaver
+from tests.aeroweaver_edge.cli.test_main import aeroweaver
 
 
 @pytest.fixture

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from aeroweaver_edge.config import MAX_UAVS
-from tests.aeroweaver_edge.cli.test_cli import aeroweaver
+from tests.aeroweaver_edge.cli.test_main import aeroweaver
 
 
 @dataclass(frozen=True)
