@@ -41,6 +41,15 @@ def pytest_configure(config: pytest.Config) -> None:
         )
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Tests that run the embedded model (llama.cpp on every core) share one xdist worker
+    (``--dist loadgroup``): two at once on two cores would each run at half speed against
+    deadlines sized for one."""
+    for item in items:
+        if item.get_closest_marker("embedded") is not None:
+            item.add_marker(pytest.mark.xdist_group("embedded"))
+
+
 def pytest_runtest_setup(item: pytest.Item) -> None:
     for name in REQUIREMENTS:
         if item.get_closest_marker(name) is None:
