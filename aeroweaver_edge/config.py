@@ -325,6 +325,11 @@ class VehicleConfig(_Section):
     command_timeout_s: Finite = Field(default=0.5, gt=0, le=10.0)  # per try, before a retry
     command_retries: int = Field(default=4, ge=0, le=10)
     failsafe_policy: Literal["warn", "refuse"] = "refuse"  # autopilot failsafe check at connect
+    # What the autopilot does when this daemon falls silent (SIGKILL, SIGSTOP, a hung loop):
+    # set at preflight (ArduPilot GCS failsafe with the daemon as GCS, PX4 offboard loss);
+    # "check" writes nothing and only verifies. The daemon refuses to arm without it.
+    companion_failsafe: Literal["land", "return", "check"] = "land"
+    companion_loss_s: Finite = Field(default=3.0, ge=2.0, le=5.0)  # silence before the action
     upload_fence: bool = True  # the safety geofence, uploaded as the autopilot's fence
     end_action: Literal["land", "return"] = "land"  # at mission end or operator stop
     on_link_loss: Literal["failsafe", "land", "return"] = "failsafe"  # when the link is back

@@ -59,6 +59,7 @@ class Faults:
     deaf: bool = False  # hear nothing at all
     no_autopilot_version: bool = False
     no_params: bool = False
+    locked_params: frozenset[str] = frozenset()  # PARAM_SET echoes the old value (refused)
     slow_commands: dict[int, float] = field(default_factory=dict)  # IN_PROGRESS, then final
 
 
@@ -129,7 +130,7 @@ class EmulatedAutopilot:
         self._rng = random.Random(seed * 7919 + sysid)
         table = PX4_PARAMS if personality.name == "px4" else ARDUPILOT_PARAMS
         self.params: dict[str, tuple[float, int]] = dict(table)
-        self.params["MAV_SYS_ID" if personality.name == "px4" else "SYSID_THISMAV"] = (
+        self.params["MAV_SYS_ID" if personality.name == "px4" else "MAV_SYSID"] = (
             sysid,
             PARAM_INT32,
         )
@@ -165,7 +166,7 @@ class EmulatedAutopilot:
         self._last_tick = time.monotonic()
         self._guided_stopped = False
         self._text_id = 0
-        self.gcs_seen_at: float | None = None  # ArduPilot: last HEARTBEAT from SYSID_MYGCS
+        self.gcs_seen_at: float | None = None  # ArduPilot: last HEARTBEAT from MAV_GCS_SYSID
         self.gcs_failsafe = False
 
     # -- helpers ---------------------------------------------------------------------------
@@ -297,7 +298,9 @@ class EmulatedAutopilot:
             )
 
     def _on_heartbeat(self, msg: Message) -> None:
-        if self.p.name == "ardupilot" and msg.get_srcSystem() == int(self.param("SYSID_MYGCS")):
+        # Any component of the GCS system counts (GCS_MAVLINK::handle_heartbeat): a daemon
+        # that set MAV_GCS_SYSID to the vehicle's own id is its GCS of record.
+        if self.p.name == "ardupilot" and msg.get_srcSystem() == int(self.param("MAV_GCS_SYSID")):
             self.gcs_seen_at = time.monotonic()
 
     def _on_ftp(self, msg: Message) -> None:
@@ -578,8 +581,9 @@ class EmulatedAutopilot:
             return
         ptype = self.params[name][1]
         value = self.p.decode_param(float(msg.param_value), ptype)
-        self.params[name] = (value, ptype)
-        self._event(f"param {name} = {value:g}")
+        if name not in self.faults.locked_params:
+            self.params[name] = (value, ptype)
+            self._event(f"param {name} = {value:g}")
         self._send_param(name, list(self.params).index(name))
 
     # -- mission protocol (fence) -----------------------------------------------------------
@@ -803,7 +807,7 @@ class EmulatedAutopilot:
             self.world.hold(self.uav)
 
     def _gcs_failsafe(self, now: float) -> None:
-        """ArduCopter's GCS failsafe: armed only once SYSID_MYGCS was heard; after
+        """ArduCopter's GCS failsafe: armed only once MAV_GCS_SYSID was heard; after
         FS_GCS_TIMEOUT of silence FS_GCS_ENABLE decides (1, 2: RTL; 3 SmartRTL and 6 Auto
         RTL, unavailable here: RTL; 4 SmartRTL, unavailable: land; 5: land; 7: brake).
         The daemon heartbeats with the vehicle's own system id, so it never counts."""

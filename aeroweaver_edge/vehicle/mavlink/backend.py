@@ -25,6 +25,7 @@ from aeroweaver_edge.contracts.ports import Health
 from aeroweaver_edge.contracts.wire import VehicleStatus
 from aeroweaver_edge.runtime.lifecycle import cancel_all
 from aeroweaver_edge.vehicle.errors import VehicleError
+from aeroweaver_edge.vehicle.mavlink import companion_failsafe
 from aeroweaver_edge.vehicle.mavlink.codec import Message, mavlink
 from aeroweaver_edge.vehicle.mavlink.commands import CommandClient, CommandError
 from aeroweaver_edge.vehicle.mavlink.fence import rectangle, upload_fence
@@ -71,6 +72,7 @@ class PreflightReport:
     problems: list[str] = field(default_factory=list)
     params: dict[str, float | None] = field(default_factory=dict)
     fence_uploaded: bool = False
+    companion_failsafe: companion_failsafe.FailsafeReport | None = None
 
     @property
     def ok(self) -> bool:
@@ -210,6 +212,7 @@ class MavlinkVehicle:
 
     async def _preflight(self) -> PreflightReport:
         rep = PreflightReport()
+        await self._companion_failsafe(rep)
         for rule in self.personality.failsafe_rules:
             value = await self.params.get(rule.name)
             rep.params[rule.name] = value
@@ -233,6 +236,27 @@ class MavlinkVehicle:
                 except LinkError as exc:
                     rep.problems.append(f"geofence not uploaded: {exc}")
         return rep
+
+    async def _companion_failsafe(self, rep: PreflightReport) -> None:
+        """Make the autopilot land or return on the daemon's silence; say what was set."""
+        assert self.link.sysid is not None
+        fs = await companion_failsafe.configure(
+            self.params,
+            self.personality.name,
+            self.link.sysid,
+            self.cfg.companion_failsafe,
+            self.cfg.companion_loss_s,
+        )
+        rep.params.update(fs.values)
+        rep.problems.extend(fs.problems)
+        rep.companion_failsafe = fs
+        if fs.ok:
+            log.info(
+                "%s: companion-loss failsafe: %s%s",
+                self.name,
+                fs.summary,
+                f" (set {', '.join(fs.changed)})" if fs.changed else " (as found)",
+            )
 
     async def _origin(self) -> GeoOrigin | None:
         """The local frame's geodetic origin, from one global + local position pair."""
@@ -350,6 +374,7 @@ class MavlinkVehicle:
         async with self._action:
             if self.personality.name == "ardupilot":
                 await self._set_mode("takeoff")  # Copter arms and takes off in GUIDED
+            self.link.beat()  # the companion-loss failsafe is armed before the vehicle is
             await self.commands.send(
                 mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, done=lambda: self.armed
             )

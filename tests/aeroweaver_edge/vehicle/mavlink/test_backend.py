@@ -148,7 +148,8 @@ async def test_a_command_racing_the_lease_expiry_is_not_overridden_by_the_hold()
 
 
 async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> None:
-    async with emulated(1, vehicle={"link_timeout_s": 1.5}) as (host, [v]):
+    # real time: the failsafe's landing (7 s from 5 m) outlasts the link's recovery below
+    async with emulated(1, vehicle={"link_timeout_s": 1.5}, time_scale=1.0) as (host, [v]):
         ap = host.vehicles[0]
         await fly(v)
         await v.set_velocity(2.0, 1.0, 0.0)
@@ -158,7 +159,8 @@ async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> No
         assert not (await v.health()).ok
         assert not v.stream.active  # the stream stopped with the link
         ap.faults.deaf = False
-        await until(lambda: ap.mode == "AUTO.LOITER", 3, "offboard-loss failsafe")
+        # the companion-loss failsafe the daemon set at preflight: land (COM_OBL_RC_ACT 4)
+        await until(lambda: ap.mode == "AUTO.LAND", 3, "offboard-loss failsafe")
         with pytest.raises(VehicleError, match="no new motion"):
             await v.set_velocity(1.0, 0.0, 0.0)
         ap.faults.mute = False
@@ -167,7 +169,7 @@ async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> No
         hb = v.link.stats.datagrams
         await until(lambda: v.link.stats.datagrams > hb + 20, 5, "traffic after recovery")
         assert ap.setpoints == seen  # nothing was streamed again on its own
-        assert ap.mode == "AUTO.LOITER"
+        assert ap.mode == "AUTO.LAND"
         await v.set_velocity(1.0, 0.0, 0.0)  # a fresh command: offboard again
         assert ap.mode == "OFFBOARD"
 
@@ -193,7 +195,7 @@ def test_an_event_loop_stall_stops_the_stream_and_the_autopilot_failsafe_fires()
                 time.sleep(1.5)  # noqa: ASYNC251 - the stall under test: the loop is blocked
                 # The emulator (another thread) saw the stream stop and failed safe.
                 assert any("offboard loss" in e for _t, e in ap.events)
-                assert ap.mode == "AUTO.LOITER"
+                assert ap.mode == "AUTO.LAND"  # the companion-loss failsafe set at preflight
                 assert time.monotonic() - stalled_at >= 1.5
                 await until(lambda: v.stream.stats.expired == 1, 2, "lease expiry noticed")
                 assert not v.stream.active  # the old setpoint is never resumed
@@ -235,11 +237,13 @@ async def test_own_body_scoping_only_the_configured_system_is_ever_addressed() -
 
 
 async def test_failsafe_check_refuses_to_arm_an_unsafe_profile_and_names_the_parameter() -> None:
-    async with emulated(1, params={"COM_OBL_RC_ACT": 0}) as (host, [v]):
+    check = {"companion_failsafe": "check"}  # verify only: the daemon writes nothing
+    async with emulated(1, params={"COM_OBL_RC_ACT": 0}, vehicle=check) as (host, [v]):
         assert v.refused is not None
-        assert "COM_OBL_RC_ACT=0" in v.refused
+        assert "COM_OBL_RC_ACT=0, needs 4 or 3" in v.refused
         assert not (await v.health()).ok
-        with pytest.raises(VehicleError, match="refusing to arm: COM_OBL_RC_ACT=0"):
+        assert host.vehicles[0].param("COM_OBL_RC_ACT") == 0  # nothing written
+        with pytest.raises(VehicleError, match="refusing to arm: companion-loss failsafe: COM_OBL"):
             await v.arm()
         assert executed(host.vehicles[0], ARM) == 0
 
