@@ -7,7 +7,7 @@ from aeroweaver_edge.vehicle.mavlink.personality import PARAM_INT32, PARAM_REAL3
 
 # Parameter name -> (value, type), as the firmware ships them: PX4's COM_OBL_RC_ACT 0
 # (Position mode: hands control to RC sticks), ArduCopter's FS_GCS_ENABLE 0 (no GCS
-# failsafe). The daemon sets its companion-loss failsafe at preflight
+# failsafe), FENCE_ENABLE 0. The daemon sets its companion-loss failsafe at preflight
 # (vehicle/mavlink/companion_failsafe.py). ArduPilot names as in 4.7 (MAV_SYSID,
 # MAV_GCS_SYSID; SYSID_THISMAV and SYSID_MYGCS before).
 PX4_PARAMS: dict[str, tuple[float, int]] = {
@@ -24,7 +24,7 @@ PX4_PARAMS: dict[str, tuple[float, int]] = {
     "MAV_SYS_ID": (1, PARAM_INT32),
 }
 ARDUPILOT_PARAMS: dict[str, tuple[float, int]] = {
-    "FENCE_ENABLE": (1, PARAM_INT32),
+    "FENCE_ENABLE": (0, PARAM_INT32),
     "FENCE_TYPE": (7, PARAM_INT32),
     "FENCE_ACTION": (1, PARAM_INT32),
     "FS_GCS_ENABLE": (0, PARAM_INT32),

@@ -213,6 +213,8 @@ class MavlinkVehicle:
     async def _preflight(self) -> PreflightReport:
         rep = PreflightReport()
         await self._companion_failsafe(rep)
+        if self.cfg.upload_fence and self.cfg.companion_failsafe != "check":
+            await self._enable_fence()
         for rule in self.personality.failsafe_rules:
             value = await self.params.get(rule.name)
             rep.params[rule.name] = value
@@ -236,6 +238,19 @@ class MavlinkVehicle:
                 except LinkError as exc:
                     rep.problems.append(f"geofence not uploaded: {exc}")
         return rep
+
+    async def _enable_fence(self) -> None:
+        """ArduCopter ships with its fence off (FENCE_ENABLE 0): the daemon that uploads the
+        fence turns it on, so the autopilot enforces the same fence as the gate. A vehicle
+        that will not take it fails the FENCE_ENABLE rule below, by name."""
+        if self.personality.name != "ardupilot":
+            return
+        found = await self.params.get("FENCE_ENABLE")
+        if found is None or found == 1.0:
+            return
+        with contextlib.suppress(LinkError):
+            now = await self.params.set("FENCE_ENABLE", 1.0)
+            log.info("%s: autopilot fence: FENCE_ENABLE %g -> %g", self.name, found, now)
 
     async def _companion_failsafe(self, rep: PreflightReport) -> None:
         """Make the autopilot land or return on the daemon's silence; say what was set."""

@@ -316,7 +316,7 @@ def _airborne_guided(gcs: Gcs) -> None:
 
 def test_ardupilot_fence_health_bit_follows_the_breach() -> None:
     # FENCE_ACTION 0 (report only): present, not enabled; health clears while outside.
-    with ground_station("ardupilot", {"FENCE_ACTION": 0}) as (host, gcs):
+    with ground_station("ardupilot", {"FENCE_ACTION": 0, "FENCE_ENABLE": 1}) as (host, gcs):
         first = gcs.wait("SYS_STATUS", lambda m: m.get_type() == "SYS_STATUS")
         assert _bits(first) == (True, False, True)
         _upload_square_fence(gcs, host, half_m=6.0)
@@ -333,7 +333,8 @@ def test_ardupilot_fence_health_bit_follows_the_breach() -> None:
 
 
 def test_ardupilot_fence_breach_returns_home_and_fence_enable_clears_the_enabled_bit() -> None:
-    with ground_station("ardupilot") as (host, gcs):
+    # ArduCopter ships with FENCE_ENABLE 0 (the daemon turns it on at preflight)
+    with ground_station("ardupilot", {"FENCE_ENABLE": 1}) as (host, gcs):
         first = gcs.wait("SYS_STATUS", lambda m: m.get_type() == "SYS_STATUS")
         assert _bits(first) == (True, True, True)  # FENCE_TYPE 7, FENCE_ENABLE 1, ACTION 1
         _upload_square_fence(gcs, host, half_m=6.0)

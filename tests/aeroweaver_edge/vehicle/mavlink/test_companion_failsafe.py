@@ -26,7 +26,10 @@ ARM = 400
 @pytest.mark.parametrize(
     ("personality", "expected"),
     [
-        ("ardupilot", {"MAV_GCS_SYSID": 1.0, "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 3.0}),
+        (
+            "ardupilot",  # and the fence it uploads, on (ArduCopter ships FENCE_ENABLE 0)
+            {"MAV_GCS_SYSID": 1.0, "FS_GCS_ENABLE": 5.0, "FS_GCS_TIMEOUT": 3.0, "FENCE_ENABLE": 1},
+        ),
         ("px4", {"COM_OBL_RC_ACT": 4.0, "COM_OF_LOSS_T": 1.0}),
     ],
 )
@@ -103,7 +106,12 @@ def wait_flying(proc: subprocess.Popen[str], timeout_s: float) -> None:
     lines: queue.Queue[str] = queue.Queue()
     assert proc.stdout is not None
     out = proc.stdout
-    threading.Thread(target=lambda: [lines.put(x) for x in out], daemon=True).start()
+
+    def pump() -> None:
+        for x in out:
+            lines.put(x)
+
+    threading.Thread(target=pump, daemon=True).start()
     seen: list[str] = []
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
