@@ -106,7 +106,9 @@ class MavlinkVehicle:
         )
         self.preflight = PreflightReport()
         self.refused: str | None = None
-        self.origin: GeoOrigin | None = None
+        self.origin: GeoOrigin | None = None  # the autopilot's local frame, geodetic
+        self.frame = GeoOrigin(*cfg.origin) if cfg.origin is not None else None
+        self.offset = (0.0, 0.0, 0.0)  # the autopilot's local origin in the swarm frame
         self._action = asyncio.Lock()  # one mode change / action at a time
         self._stamp: TimestampStore | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -221,6 +223,16 @@ class MavlinkVehicle:
             problem = rule.check(value)
             if problem:
                 rep.problems.append(problem)
+        if self.frame is not None:
+            local = await self._origin()
+            if local is None:
+                rep.problems.append(
+                    "no global position: cannot place the vehicle in vehicle.origin"
+                )
+            else:
+                self.offset = self.frame.to_local(local.lat_deg, local.lon_deg, local.alt_m)
+                log.info("%s: local frame origin at N %.2f E %.2f D %.2f of vehicle.origin",
+                         self.name, *self.offset)  # fmt: skip
         if self.cfg.upload_fence:
             origin = await self._origin()
             if origin is None:
@@ -230,7 +242,7 @@ class MavlinkVehicle:
                 try:
                     await upload_fence(
                         self.link,
-                        rectangle(origin, s.geofence_north_m, s.geofence_east_m),
+                        rectangle(self.frame or origin, s.geofence_north_m, s.geofence_east_m),
                         timeout_s=self.cfg.command_timeout_s,
                         retries=self.cfg.command_retries,
                     )
@@ -320,8 +332,9 @@ class MavlinkVehicle:
         loc: Message | None = self.link.last.get("LOCAL_POSITION_NED")
         if loc is None:
             raise VehicleError(f"{self.name}: no position telemetry yet")
+        n, e, d = self.offset
         return VehicleState(
-            (float(loc.x), float(loc.y), float(loc.z)),
+            (float(loc.x) + n, float(loc.y) + e, float(loc.z) + d),
             (float(loc.vx), float(loc.vy), float(loc.vz)),
             armed=self.armed,
             in_air=self.in_air,
@@ -336,8 +349,9 @@ class MavlinkVehicle:
         battery = None if sys is None or sys.battery_remaining < 0 else float(sys.battery_remaining)
         hb = self.link.heartbeat
         hb_age = None if hb is None else time.monotonic() - self.link.heartbeat_at
+        n, e, d = self.offset
         return VehicleStatus(
-            pos=(float(loc.x), float(loc.y), float(loc.z)),
+            pos=(float(loc.x) + n, float(loc.y) + e, float(loc.z) + d),
             vel=(float(loc.vx), float(loc.vy), float(loc.vz)),
             armed=self.armed, in_air=self.in_air, mode=self.mode_name[:64],
             battery_pct=battery,
@@ -464,7 +478,8 @@ class MavlinkVehicle:
     async def goto(self, north: float, east: float, down: float) -> None:
         if not all(math.isfinite(v) for v in (north, east, down)):
             raise VehicleError(f"{self.name}: non-finite position")
-        await self._motion(Setpoint("position", north, east, down))
+        n, e, d = self.offset  # the swarm frame's target in the autopilot's own frame
+        await self._motion(Setpoint("position", north - n, east - e, down - d))
 
     async def hold(self) -> None:
         self._require_link()

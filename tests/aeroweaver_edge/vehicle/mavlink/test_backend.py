@@ -15,6 +15,7 @@ from aeroweaver_edge.vehicle.errors import VehicleError
 from aeroweaver_edge.vehicle.mavlink.backend import MavlinkVehicle
 from aeroweaver_edge.vehicle.mavlink.codec import mavlink
 from aeroweaver_edge.vehicle.mavlink.commands import CommandError
+from aeroweaver_edge.vehicle.mavlink.geo import DEFAULT_ORIGIN, GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.link import LinkError
 from tests.helpers.mav import ThreadedEmulator, emulated, free_udp_ports, until, vehicle_config
 
@@ -318,3 +319,24 @@ async def test_stale_position_telemetry_degrades_even_with_heartbeats() -> None:
         assert v.link.alive  # heartbeats still flow
         with pytest.raises(VehicleError, match="telemetry stale; no new motion"):
             await v.set_velocity(1.0, 0.0, 0.0)
+
+
+async def test_vehicle_origin_shifts_positions_targets_and_the_fence_into_the_swarm_frame() -> None:
+    """Each real autopilot's local frame is centred where it booted; ``vehicle.origin`` puts
+    every vehicle into one shared frame (SITL instances at different homes, a real swarm)."""
+    south = DEFAULT_ORIGIN.to_global(-10.0, 4.0, 0.0)  # the swarm's origin: 10 m S, 4 m E
+    async with emulated(1, vehicle={"origin": list(south)}) as (host, [v]):
+        ap = host.vehicles[0]
+        raw = v.link.last["LOCAL_POSITION_NED"]
+        st = await v.state()
+        assert st.pos[0] == pytest.approx(float(raw.x) + 10.0, abs=0.05)
+        assert st.pos[1] == pytest.approx(float(raw.y) - 4.0, abs=0.05)
+        fence = ap.fence  # the gate's rectangle, anchored at the swarm origin
+        lat0 = min(item.x for item in fence) / 1e7
+        n_min = SafetyConfig().geofence_north_m[0]
+        assert lat0 == pytest.approx(GeoOrigin(*south).to_global(n_min, 0.0)[0], abs=1e-6)
+        await fly(v)
+        await v.goto(st.pos[0] + 3.0, st.pos[1], -5.0)  # in the swarm frame
+        await until(lambda: ap.setpoint is not None and ap.setpoint[0] == "position", 2, "target")
+        assert ap.setpoint is not None
+        assert ap.setpoint[1] == pytest.approx(float(raw.x) + 3.0, abs=0.1)  # autopilot frame
