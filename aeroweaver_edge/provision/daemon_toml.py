@@ -15,8 +15,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel
 
-Vehicle = Literal["sim", "emulator", "mavlink", "mavsdk"]
-VEHICLES: tuple[Vehicle, ...] = ("sim", "emulator", "mavlink", "mavsdk")
+Vehicle = Literal["sim", "emulator", "sitl", "mavlink", "mavsdk"]
+VEHICLES: tuple[Vehicle, ...] = ("sim", "emulator", "sitl", "mavlink", "mavsdk")
 VEHICLE_PORT = 14540  # PX4 SITL convention: instance i sends MAVLink to 14540 + i
 # The emulator flies in an empty field: these are the demo's landmarks (configs/uav-emulator.toml).
 DEMO_POINTS: tuple[dict[str, Any], ...] = (

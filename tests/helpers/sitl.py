@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from aeroweaver_edge.provision import sitl as provision_sitl
 from aeroweaver_edge.vehicle.mavlink.geo import GeoOrigin
 from tests.helpers.netlab import NetLab, Segment
 
@@ -27,25 +28,8 @@ SKIP = (
     f"no SITL binary: set {ENV}=/path/to/arducopter (ArduPilot's own SITL build, "
     "./waf configure --board sitl && ./waf copter: build/sitl/bin/arducopter)"
 )
-HOME = GeoOrigin(47.397742, 8.545594, 488.0)  # the emulator's default origin (Zurich)
-SPACING_M = 5.0  # instance i starts 5 m east of instance i-1, as the emulator's row
 DAEMON_PORT = 14550  # on the host end of each instance's link
-WATCH_PORT = 14560
 EARLY_EXIT_S = 3.0  # an instance that dies this soon after start is reported, not waited on
-
-# What a SITL vehicle needs to pass ArduCopter's arming checks with every check on: the
-# simulated IMU and RC are uncalibrated otherwise (our own list, from the prearm texts a
-# bare instance sends). Anything else is the firmware's default.
-SITL_PARAMS: dict[str, float] = {
-    "FRAME_CLASS": 1,  # quad
-    "FRAME_TYPE": 1,  # X
-    **{f"INS_ACC{s}OFFS_{a}": 0.001 for s in ("", "2") for a in "XYZ"},
-    **{f"INS_ACC{s}SCAL_{a}": 1.001 for s in ("", "2") for a in "XYZ"},
-    **{f"RC{c}_{k}": v for c in range(1, 9) for k, v in (("MIN", 1000), ("MAX", 2000))},
-    **{f"RC{c}_TRIM": 1500 for c in range(1, 9)},
-    "FS_THR_ENABLE": 0,  # no RC transmitter in the loop (the companion failsafe is ours)
-    "SIM_BARO_RND": 0,
-}
 
 
 class SitlError(RuntimeError):
@@ -66,11 +50,6 @@ def check_binary(path: Path) -> Path:
     if not os.access(path, os.X_OK):
         raise SitlError(f"{ENV}={path}: not executable (chmod +x, or point at build/sitl/bin)")
     return path.resolve()
-
-
-def home_of(i: int) -> GeoOrigin:
-    lat, lon, alt = HOME.to_global(0.0, SPACING_M * i, 0.0)
-    return GeoOrigin(lat, lon, alt)
 
 
 @dataclass
@@ -124,18 +103,15 @@ class SitlFleet:
         seg = self.lab.veth()
         workdir = self.root / f"sitl{i}"
         workdir.mkdir(parents=True, exist_ok=True)
-        parm = workdir / "aeroweaver-sitl.parm"
-        values = {**SITL_PARAMS, **self.params}
+        parm = workdir / provision_sitl.PARAMS_FILE
+        values = {**provision_sitl.PARAMS, **self.params}
         parm.write_text("".join(f"{k} {v:g}\n" for k, v in values.items()))
-        h = home_of(i)
-        cmd = [
-            *seg.prefix(), str(self.binary), "--model", "quad", "--speedup", f"{self.speedup:g}",
-            "--home", f"{h.lat_deg:.7f},{h.lon_deg:.7f},{h.alt_m:.1f},0",
-            "--defaults", str(parm), "--sysid", str(i + 1), "-I0",
-            "--serial0", f"udpclient:{seg.host_ip}:{DAEMON_PORT}",
-        ]  # fmt: skip
-        if self.watch_port is not None:
-            cmd += ["--serial1", f"udpclient:{seg.host_ip}:{self.watch_port}"]
+        serial1 = None if self.watch_port is None else f"{seg.host_ip}:{self.watch_port}"
+        argv = provision_sitl.command(
+            i, f"{seg.host_ip}:{DAEMON_PORT}", binary=str(self.binary), defaults=str(parm),
+            speedup=self.speedup, serial1=serial1, instance=0,
+        )  # fmt: skip
+        cmd = [*seg.prefix(), *argv]
         log = workdir / "sitl.log"
         with log.open("wb") as fh:
             proc = subprocess.Popen(
