@@ -63,6 +63,7 @@ TELEMETRY = {  # message id -> interval (us) we ask for; PX4 streams these anywa
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1_000_000,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 1_000_000,
 }
+PREARM_CHECK = mavlink.MAV_SYS_STATUS_PREARM_CHECK
 PRESTREAM_S = 0.5  # zero setpoints streamed before offboard is requested (PX4 needs > 2 Hz)
 MODE_CONFIRM_S = 3.0  # three 1 Hz heartbeats: a lost one must not fail the command
 
@@ -114,6 +115,8 @@ class MavlinkVehicle:
         self._tasks: list[asyncio.Task[None]] = []
         self._t0 = time.monotonic()
         self.motion_refused = 0
+        self.arm_check: str | None = None  # the autopilot's last "PreArm: ..." / "Arm: ..." text
+        self.link.on("STATUSTEXT", self._on_text)
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -174,6 +177,31 @@ class MavlinkVehicle:
             cfg.url,
             "ok" if self.preflight.ok else f"{len(self.preflight.problems)} problem(s)",
         )
+
+    def _on_text(self, msg: Message) -> None:
+        text = str(msg.text).rstrip("\x00").strip()
+        if text.startswith(("PreArm:", "Arm:")):
+            self.arm_check = text[:120]
+
+    @property
+    def prearm_ok(self) -> bool | None:
+        """The autopilot's own arming checks (SYS_STATUS pre-arm bit); None: not reported."""
+        sys: Message | None = self.link.last.get("SYS_STATUS")
+        if sys is None or not sys.onboard_control_sensors_present & PREARM_CHECK:
+            return None
+        return bool(sys.onboard_control_sensors_health & PREARM_CHECK)
+
+    async def _wait_arming_checks(self) -> None:
+        """EKF, GPS and every arming check as the autopilot judges them: wait for its pre-arm
+        bit (ArduPilot reports one; PX4 does not), or refuse naming the check that failed."""
+        deadline = time.monotonic() + self.cfg.connect_timeout_s
+        while self.prearm_ok is False:
+            if time.monotonic() > deadline:
+                raise VehicleError(
+                    f"{self.name}: arming checks not passed within "
+                    f"{self.cfg.connect_timeout_s:g} s: {self.arm_check or 'no reason given'}"
+                )
+            await asyncio.sleep(0.1)
 
     async def aclose(self) -> None:
         self.stream.stop()
@@ -401,12 +429,17 @@ class MavlinkVehicle:
         if self.in_air:
             raise VehicleError(f"{self.name}: refusing to arm a vehicle that reports in air")
         async with self._action:
+            await self._wait_arming_checks()
             if self.personality.name == "ardupilot":
                 await self._set_mode("takeoff")  # Copter arms and takes off in GUIDED
             self.link.beat()  # the companion-loss failsafe is armed before the vehicle is
-            await self.commands.send(
-                mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, done=lambda: self.armed
-            )
+            try:
+                await self.commands.send(
+                    mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, done=lambda: self.armed
+                )
+            except CommandError as exc:
+                why = f": {self.arm_check}" if self.arm_check else ""
+                raise VehicleError(f"{self.name}: {exc}{why}") from None
             await self.wait_until(lambda: self.armed, MODE_CONFIRM_S, "arming")
 
     async def takeoff(self, altitude_m: float) -> None:
