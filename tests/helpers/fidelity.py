@@ -11,7 +11,6 @@ STATUSTEXT, landed states, and named marks (``mark``) whose spacing the comparis
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import math
 import re
@@ -151,6 +150,15 @@ class Driver:
         loc = self.link.last.get("LOCAL_POSITION_NED")
         return 0.0 if loc is None else math.hypot(float(loc.vx), float(loc.vy))
 
+    async def ask_telemetry(self) -> None:
+        """The same message intervals the daemon's backend asks for."""
+        from aeroweaver_edge.vehicle.mavlink.backend import TELEMETRY
+
+        for msg_id, interval in TELEMETRY.items():
+            await self.commands.send(
+                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, float(msg_id), float(interval), check=False
+            )
+
     async def wait(self, cond: Callable[[], bool], timeout_s: float, what: str) -> float:
         started = time.monotonic()
         while not cond():
@@ -178,10 +186,13 @@ class Driver:
         return await self.params.set(name, value)
 
     async def fence(self, north: tuple[float, float], east: tuple[float, float]) -> None:
-        g = self.link.last.get("GLOBAL_POSITION_INT")
-        loc = self.link.last.get("LOCAL_POSITION_NED")
-        if g is None or loc is None:
-            raise CaseFailed(f"{self.trace.case}: no position to anchor the fence")
+        last = self.link.last
+        await self.wait(
+            lambda: "GLOBAL_POSITION_INT" in last and "LOCAL_POSITION_NED" in last,
+            120,
+            "a position to anchor the fence",
+        )
+        g, loc = last["GLOBAL_POSITION_INT"], last["LOCAL_POSITION_NED"]
         probe = GeoOrigin(g.lat / 1e7, g.lon / 1e7, g.alt / 1000.0)
         origin = GeoOrigin(*probe.to_global(-loc.x, -loc.y, -loc.z))
         await upload_fence(self.link, rectangle(origin, north, east), timeout_s=1.0)
@@ -209,11 +220,17 @@ class Driver:
         for task in self.link._tasks[:1]:  # the heartbeat loop
             task.cancel()
 
+    def resume(self) -> None:
+        """Heartbeats again (the GCS failsafe clears; arming is refused while it is on)."""
+        self.link._tasks[0] = asyncio.create_task(self.link._heartbeat_loop())
+
     async def take_off(self, alt: float = 5.0) -> None:
+        await self.wait(lambda: "LOCAL_POSITION_NED" in self.link.last, 120, "a position")
         await self.wait(lambda: self.prearm_ok, 120, "pre-arm checks passed")
         await self.set_mode("GUIDED")
         await self.wait(lambda: self.mode == "GUIDED", 5, "GUIDED")
         if await self.arm() != mavlink.MAV_RESULT_ACCEPTED:
+            await asyncio.sleep(0.5)  # the reason's STATUSTEXT follows the ACK
             raise CaseFailed(f"{self.trace.case}: arming refused")
         await self.wait(lambda: self.armed, 5, "armed")
         await self.takeoff(alt)
@@ -286,27 +303,37 @@ async def companion_loss_lands(d: Driver) -> None:
     await asyncio.sleep(1.5)  # a heartbeat in the air
     d.silence()
     d.mark("silenced")
-    await d.wait(lambda: d.mode != "GUIDED", 15, "the failsafe's mode")
-    d.mark("failsafe_mode")
-    await d.down()
+    try:
+        await d.wait(lambda: d.mode != "GUIDED", 15, "the failsafe's mode")
+        d.mark("failsafe_mode")
+        await d.down()
+    finally:
+        d.resume()
+        await d.set_param("FS_GCS_ENABLE", 0)
+    await asyncio.sleep(2.0)  # heard again: "GCS Failsafe Cleared"
 
 
 async def fence_breach_returns(d: Driver) -> None:
-    """A polygon fence 8 m north of home: flying north through it makes Copter return."""
+    """A polygon fence 8 m north of home. In GUIDED ArduCopter never flies through it: a
+    velocity target north stops short (its fence avoidance, AVOID_ENABLE, FENCE_MARGIN 2 m)
+    and a position target beyond it is ignored. A fence moved in flight to behind the
+    vehicle is a breach: FENCE_ACTION 1 returns (RTL) and lands."""
     await d.set_param("FENCE_ENABLE", 0)
     await d.fence((-20.0, 8.0), (-20.0, 20.0))
     await d.set_param("FENCE_ACTION", 1)
     await d.set_param("FENCE_ENABLE", 1)
     try:
         await d.take_off(5.0)
-        stream = asyncio.create_task(d.stream("velocity", 3.0, 0.0, 0.0, 10.0))
-        try:
-            await d.wait(lambda: d.mode != "GUIDED", 12, "the fence's mode")
-            d.mark("breach_mode")
-        finally:
-            stream.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await stream
+        await d.stream("velocity", 3.0, 0.0, 0.0, 6.0)
+        d.trace.events.append((d.now(), "velocity_stopped_inside", str(d.pos[0] < 8.0)))
+        await d.stream("position", 20.0, 0.0, -5.0, 0.3)
+        await asyncio.sleep(3.0)
+        d.trace.events.append((d.now(), "target_beyond_ignored", str(d.pos[0] < 8.0)))
+        d.trace.events.append((d.now(), "mode_after_push", d.mode))
+        await d.fence((-20.0, 2.0), (-20.0, 20.0))  # now the vehicle is outside it
+        d.mark("fence_moved")
+        await d.wait(lambda: d.mode != "GUIDED", 20, "the fence's mode")
+        d.mark("breach_mode")
         await d.down(120.0)
     finally:
         await d.set_param("FENCE_ENABLE", 0)
@@ -327,9 +354,9 @@ CASES: dict[str, Case] = {
     "guided_takeoff_and_land": guided_takeoff_and_land,
     "velocity_target_expires": velocity_target_expires,
     "position_target_holds": position_target_holds,
-    "companion_loss_lands": companion_loss_lands,
     "fence_breach_returns": fence_breach_returns,
     "rtl_returns_and_lands": rtl_returns_and_lands,
+    "companion_loss_lands": companion_loss_lands,
 }
 
 
@@ -342,10 +369,15 @@ async def fly_cases(url: str, target: str, names: list[str]) -> list[Trace]:
         trace = Trace(names[0], target)
         d = Driver(link, trace)
         await link.connect(60.0)
+        await d.ask_telemetry()
         for name in names:
             trace = Trace(name, target)
             d.restart(trace)
-            await CASES[name](d)
+            try:
+                await CASES[name](d)
+            except CaseFailed as exc:
+                texts = [v for _t, k, v in trace.events if k == "text"][-5:]
+                raise CaseFailed(f"{exc}; last texts: {texts}") from None
             traces.append(trace)
     finally:
         await link.aclose()

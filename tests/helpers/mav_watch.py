@@ -5,6 +5,7 @@ under test."""
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import threading
 import time
@@ -83,15 +84,35 @@ class MavWatcher:
         return self.vehicles.setdefault(sysid, Watch(sysid))
 
     def _run(self) -> None:
+        answered: dict[tuple[str, int], float] = {}
         while not self._stop.is_set():
             try:
-                data = self.sock.recv(65536)
+                data, addr = self.sock.recvfrom(65536)
             except TimeoutError:
                 continue
             except OSError:
                 return
             for msg in self.codec.decode(data):
                 self._on(msg)
+            now = time.monotonic()
+            if now - answered.get(addr, 0.0) > 1.0:
+                answered[addr] = now
+                self._answer(addr)
+
+    def _answer(self, addr: tuple[str, int]) -> None:
+        """A ground station's heartbeat and a request for every stream (4 Hz), once a second:
+        ArduPilot sends texts and streams only on a channel that has heard from someone."""
+        mav = self.codec.mav
+        frames = [
+            mav.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0),
+            *(
+                mav.request_data_stream_encode(sysid, 1, mavlink.MAV_DATA_STREAM_ALL, 4, 1)
+                for sysid in list(self.vehicles)
+            ),
+        ]
+        for frame in frames:
+            with contextlib.suppress(OSError):
+                self.sock.sendto(self.codec.encode(frame), addr)
 
     def _on(self, msg: Message) -> None:
         if msg.get_srcComponent() != 1:

@@ -31,6 +31,7 @@ from aeroweaver_edge.world.kinematics import KinematicWorld
 R = mavlink  # short alias for the enums
 ACCEPTED: int = R.MAV_RESULT_ACCEPTED
 DENIED: int = R.MAV_RESULT_DENIED
+FAILED: int = R.MAV_RESULT_FAILED
 UNSUPPORTED: int = R.MAV_RESULT_UNSUPPORTED
 FENCE: int = R.MAV_MISSION_TYPE_FENCE
 ON_GROUND: int = R.MAV_LANDED_STATE_ON_GROUND
@@ -115,6 +116,7 @@ class EmulatedAutopilot:
         signing_key: bytes | None = None,
         faults: Faults | None = None,
         seed: int = 0,
+        prearm_s: float = 0.0,
     ) -> None:
         self.sysid = sysid
         self.uav = uav
@@ -139,6 +141,7 @@ class EmulatedAutopilot:
                 raise ValueError(f"unknown {personality.name} parameter {name!r}")
             self.params[name] = (value, self.params[name][1])
         self.t0 = time.monotonic()
+        self.prearm_s = prearm_s  # a warm-up (EKF, GPS) in which arming is refused
         self.armed = False
         self.mode = "AUTO.LOITER" if personality.name == "px4" else "STABILIZE"
         self._landed = ON_GROUND
@@ -157,7 +160,13 @@ class EmulatedAutopilot:
         self.events: list[tuple[float, str]] = []
         self.rx = Counter[str]()
         self.foreign = 0  # messages addressed to another system
-        self.intervals = dict(TELEMETRY_S)
+        # PX4 streams its telemetry from boot; ArduPilot only its HEARTBEAT until a client
+        # asks (SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM): its SRn_ rates are 0 (SITL).
+        self.intervals = (
+            dict(TELEMETRY_S)
+            if personality.name == "px4"
+            else {R.MAVLINK_MSG_ID_HEARTBEAT: TELEMETRY_S[R.MAVLINK_MSG_ID_HEARTBEAT]}
+        )
         self._due: dict[int, float] = {}
         self._dup: dict[tuple[int, int, int], tuple[tuple[float, ...], float, int]] = {}
         self._upload: _Upload | None = None
@@ -272,6 +281,8 @@ class EmulatedAutopilot:
                     self._send_param(name, i)
         elif kind == "PARAM_SET":
             self._on_param_set(msg)
+        elif kind == "REQUEST_DATA_STREAM":
+            self._on_data_stream(msg)
         elif kind == "MISSION_COUNT":
             self._on_mission_count(msg)
         elif kind == "MISSION_ITEM_INT":
@@ -296,6 +307,15 @@ class EmulatedAutopilot:
                     msg.mission_type,
                 )
             )
+
+    def _on_data_stream(self, msg: Message) -> None:
+        """REQUEST_DATA_STREAM (what MAVProxy and QGroundControl send ArduPilot): start
+        streams every telemetry message at its usual rate; stop leaves the HEARTBEAT."""
+        if msg.start_stop and msg.req_message_rate > 0:
+            for msg_id, period in TELEMETRY_S.items():
+                self.intervals.setdefault(msg_id, period)
+        elif not msg.start_stop:
+            self.intervals = {R.MAVLINK_MSG_ID_HEARTBEAT: TELEMETRY_S[R.MAVLINK_MSG_ID_HEARTBEAT]}
 
     def _on_heartbeat(self, msg: Message) -> None:
         # Any component of the GCS system counts (GCS_MAVLINK::handle_heartbeat): a daemon
@@ -346,8 +366,42 @@ class EmulatedAutopilot:
         if kind == "velocity":
             self.goto_target = None
             self.world.set_velocity(self.uav, (a, b))
+        elif self._fenced_out(a, b):
+            self._event(f"guided target N {a:.1f} E {b:.1f} outside the fence: ignored")
         else:
             self.goto_target = (a, b)
+
+    def _fenced_out(self, n: float, e: float) -> bool:
+        """ArduCopter's GUIDED refuses a destination outside its enabled fence
+        (``ModeGuided::set_destination``: ``check_destination_within_fence``)."""
+        return (
+            self.p.name == "ardupilot"
+            and self.param("FENCE_ENABLE") >= 1
+            and bool(self.fence)
+            and not self._inside_fence(n, e)
+        )
+
+    def _avoid_fence(self) -> None:
+        """ArduCopter's simple avoidance (AVOID_ENABLE fence bit) in GUIDED velocity
+        control: a velocity toward the fence stops FENCE_MARGIN short of it (recorded from
+        SITL: 3 m/s north at a fence 8 m north stopped at 6.2 m)."""
+        if (
+            self.p.name != "ardupilot"
+            or self.landed != IN_AIR
+            or self._role() != "offboard"
+            or self.goto_target is not None
+            or self.param("FENCE_ENABLE") < 1
+            or not self.fence
+            or not int(self.param("AVOID_ENABLE")) & 2
+        ):
+            return
+        b = self.world.body(self.uav)
+        if b.speed < 0.05:
+            return
+        reach = self.param("FENCE_MARGIN")
+        ahead = (b.north + b.vn / b.speed * reach, b.east + b.ve / b.speed * reach)
+        if self._inside_fence(b.north, b.east) and not self._inside_fence(*ahead):
+            self.world.hold(self.uav)
 
     # -- commands ----------------------------------------------------------------------------
 
@@ -456,11 +510,23 @@ class EmulatedAutopilot:
             return ACCEPTED
         return UNSUPPORTED
 
+    @property
+    def prearm_ready(self) -> bool:
+        """The autopilot's arming checks pass (the SYS_STATUS pre-arm bit)."""
+        return time.monotonic() - self.t0 >= self.prearm_s
+
     def _arm(self, arm: bool, force: bool) -> int:
         if arm:
+            if not self.armed and not self.prearm_ready and not force:
+                if self.p.name == "ardupilot":  # ArduCopter: FAILED, and why (AP_Arming)
+                    self._statustext(*texts.AP_ARM_NOT_READY)
+                self._event("arming refused: checks not passed")
+                return FAILED
             if not self.armed:
                 self.armed = True
                 self._event("armed")
+                if self.p.name == "ardupilot":
+                    self._statustext(*texts.AP_ARMING)
                 self.send_heartbeat()
             return ACCEPTED
         if self.landed != ON_GROUND and not force:
@@ -472,6 +538,8 @@ class EmulatedAutopilot:
         if self.armed:
             self.armed = False
             self._event(f"disarmed ({why})")
+            if self.p.name == "ardupilot":
+                self._statustext(*texts.AP_DISARMING)
             self.send_heartbeat()
 
     def _takeoff(self, param7: float) -> int:
@@ -543,6 +611,8 @@ class EmulatedAutopilot:
 
     def _guided_goto(self, n: float, e: float, *, change_mode: bool) -> int:
         """ArduCopter's GUIDED position target: the vehicle flies there and stays GUIDED."""
+        if self._fenced_out(n, e):
+            return FAILED  # handle_command_int_do_reposition: set_destination refused
         if self.mode != "GUIDED":
             if not change_mode:
                 return DENIED
@@ -634,6 +704,8 @@ class EmulatedAutopilot:
         self._upload = None
         self.breached = False
         self._event(f"fence uploaded: {len(self.fence)} items")
+        if self.p.name == "ardupilot":
+            self._statustext(*texts.AP_FENCE_LOADED)
         self._send(self.mav.mission_ack_encode(up.src[0], up.src[1], R.MAV_MISSION_ACCEPTED, FENCE))
 
     def _on_guided_request(self, msg: Message) -> None:
@@ -709,6 +781,8 @@ class EmulatedAutopilot:
         body = self.world.body(self.uav)
         inside = self._inside_fence(body.north, body.east)
         if inside:
+            if self.breached and self.p.name == "ardupilot":
+                self._statustext(*texts.AP_FENCE_CLEARED)
             self.breached = False
             return
         if self.breached:
@@ -760,6 +834,7 @@ class EmulatedAutopilot:
         self._gcs_failsafe(now)
         self._vertical(dt)
         self._guidance()
+        self._avoid_fence()
         self._check_fence()
         for due, command, src in [s for s in self._slow if s[0] <= now]:
             self._slow.remove((due, command, src))

@@ -27,6 +27,8 @@ ARDUPILOT_PARAMS: dict[str, tuple[float, int]] = {
     "FENCE_ENABLE": (0, PARAM_INT32),
     "FENCE_TYPE": (7, PARAM_INT32),
     "FENCE_ACTION": (1, PARAM_INT32),
+    "FENCE_MARGIN": (2.0, PARAM_REAL32),
+    "AVOID_ENABLE": (3, PARAM_INT32),  # fence + proximity: GUIDED velocity stops short
     "FS_GCS_ENABLE": (0, PARAM_INT32),
     "FS_GCS_TIMEOUT": (5.0, PARAM_REAL32),
     "MAV_GCS_SYSID": (255, PARAM_INT32),

@@ -57,7 +57,9 @@ IN_AIR_STATES = {
     mavlink.MAV_LANDED_STATE_TAKEOFF,
     mavlink.MAV_LANDED_STATE_LANDING,
 }
-TELEMETRY = {  # message id -> interval (us) we ask for; PX4 streams these anyway
+TELEMETRY = {  # message id -> interval (us) we ask for; PX4 streams these anyway, ArduPilot
+    # only what a client asks for (its SRn_ rates are 0 on a fresh SITL)
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1_000_000,  # battery and the pre-arm bit
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 100_000,
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 100_000,
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1_000_000,
