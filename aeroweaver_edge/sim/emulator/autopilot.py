@@ -366,6 +366,7 @@ class EmulatedAutopilot:
         if kind == "velocity":
             self.goto_target = None
             self.world.set_velocity(self.uav, (a, b))
+            self._avoid_fence()  # not even one tick toward the fence
         elif self._fenced_out(a, b):
             self._event(f"guided target N {a:.1f} E {b:.1f} outside the fence: ignored")
         else:
@@ -396,10 +397,13 @@ class EmulatedAutopilot:
         ):
             return
         b = self.world.body(self.uav)
-        if b.speed < 0.05:
+        vn, ve = (b.vn, b.ve) if b.speed >= 0.05 else (b.sp_n, b.sp_e)
+        speed = math.hypot(vn, ve)
+        if speed < 0.05:
             return
-        reach = self.param("FENCE_MARGIN")
-        ahead = (b.north + b.vn / b.speed * reach, b.east + b.ve / b.speed * reach)
+        # the margin plus the distance it takes to brake at the world's acceleration limit
+        reach = self.param("FENCE_MARGIN") + b.speed**2 / (2 * self.world.max_accel)
+        ahead = (b.north + vn / speed * reach, b.east + ve / speed * reach)
         if self._inside_fence(b.north, b.east) and not self._inside_fence(*ahead):
             self.world.hold(self.uav)
 
@@ -933,9 +937,12 @@ class EmulatedAutopilot:
                     self.set_mode("AUTO.LOITER", "takeoff complete")
                 else:
                     self.send_heartbeat()
-        elif self.landed == LANDING or (self._role() == "rtl" and self._at_home()):
+        elif self.landed == LANDING or (
+            self.landed == IN_AIR and self._role() == "rtl" and self._at_home()
+        ):
             if self.landed != LANDING:
                 self.landed = LANDING
+                self.world.hold(self.uav)  # over home: straight down, no drift
             down = (
                 self.param("MPC_LAND_SPEED")
                 if self.p.name == "px4"
