@@ -66,6 +66,7 @@ TELEMETRY = {  # message id -> interval (us) we ask for; PX4 streams these anywa
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 1_000_000,
 }
 PREARM_CHECK = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+REASK_S = 5.0  # telemetry intervals asked again while no position flows
 PRESTREAM_S = 0.5  # zero setpoints streamed before offboard is requested (PX4 needs > 2 Hz)
 MODE_CONFIRM_S = 3.0  # three 1 Hz heartbeats: a lost one must not fail the command
 
@@ -234,10 +235,20 @@ class MavlinkVehicle:
                 )
 
     async def _wait_telemetry(self, timeout_s: float) -> None:
+        """Until LOCAL_POSITION_NED flows; the intervals are asked again every few seconds
+        (a booting ArduCopter streams it only once its EKF has an origin, about 20 s in
+        SITL, and one of three instances never started it after the first request)."""
         deadline = time.monotonic() + timeout_s
+        ask_again = time.monotonic() + REASK_S
         while self.link.age("LOCAL_POSITION_NED") == math.inf:
-            if time.monotonic() > deadline:
+            now = time.monotonic()
+            if now > deadline:
                 raise VehicleError(f"{self.name}: no LOCAL_POSITION_NED within {timeout_s:g} s")
+            if now > ask_again:
+                ask_again = now + REASK_S
+                self._tasks.append(
+                    asyncio.create_task(self._ask_telemetry(), name=f"{self.name}-reask")
+                )
             await asyncio.sleep(0.02)
 
     # -- preflight: failsafe parameters and geofence -----------------------------------------
