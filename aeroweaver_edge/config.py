@@ -350,8 +350,13 @@ class VehicleConfig(_Section):
     def _origin_on_earth(
         cls, value: tuple[float, float, float] | None
     ) -> tuple[float, float, float] | None:
-        if value is not None and not (-90 <= value[0] <= 90 and -180 <= value[1] <= 180):
-            raise ValueError(f"{list(value)} is not [latitude, longitude, altitude_m]")
+        if value is not None and not (
+            -90 <= value[0] <= 90 and -180 <= value[1] <= 180 and -500 <= value[2] <= 10_000
+        ):
+            raise ValueError(
+                f"{list(value)} is not [latitude, longitude, altitude_m] "
+                "(-90..90, -180..180, -500..10000)"
+            )
         return value
 
     @model_validator(mode="after")
