@@ -325,6 +325,15 @@ class VehicleConfig(_Section):
     command_timeout_s: Finite = Field(default=0.5, gt=0, le=10.0)  # per try, before a retry
     command_retries: int = Field(default=4, ge=0, le=10)
     failsafe_policy: Literal["warn", "refuse"] = "refuse"  # autopilot failsafe check at connect
+    # What the autopilot does when this daemon falls silent (SIGKILL, SIGSTOP, a hung loop):
+    # set at preflight (ArduPilot GCS failsafe with the daemon as GCS, PX4 offboard loss);
+    # "check" writes nothing and only verifies. The daemon refuses to arm without it.
+    companion_failsafe: Literal["land", "return", "check"] = "land"
+    companion_loss_s: Finite = Field(default=3.0, ge=2.0, le=5.0)  # silence before the action
+    # The swarm's shared local frame, [lat, lon, alt_m]: every vehicle's own local frame
+    # (centred where its autopilot booted) is shifted into it, so positions, peers' beacons,
+    # [field] points and the fence agree across vehicles. Unset: the autopilot's own frame.
+    origin: tuple[Finite, Finite, Finite] | None = None
     upload_fence: bool = True  # the safety geofence, uploaded as the autopilot's fence
     end_action: Literal["land", "return"] = "land"  # at mission end or operator stop
     on_link_loss: Literal["failsafe", "land", "return"] = "failsafe"  # when the link is back
@@ -335,6 +344,20 @@ class VehicleConfig(_Section):
     # A daemon flying in the simulated world holds when the world's liveliness token goes
     # and stops if it is not back within this grace (a partition shorter than this heals).
     world_grace_s: Finite = Field(default=10.0, gt=0, le=MAX_WAIT_S)
+
+    @field_validator("origin")
+    @classmethod
+    def _origin_on_earth(
+        cls, value: tuple[float, float, float] | None
+    ) -> tuple[float, float, float] | None:
+        if value is not None and not (
+            -90 <= value[0] <= 90 and -180 <= value[1] <= 180 and -500 <= value[2] <= 10_000
+        ):
+            raise ValueError(
+                f"{list(value)} is not [latitude, longitude, altitude_m] "
+                "(-90..90, -180..180, -500..10000)"
+            )
+        return value
 
     @model_validator(mode="after")
     def _link(self) -> VehicleConfig:

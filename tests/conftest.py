@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers import sitl
 from tests.helpers.hang_dump import dump_asyncio_tasks, timeout_s
 from tests.helpers.requirements import ALLOW_SKIP_ENV, REQUIREMENTS, allowed_skips, decide, missing
 from tests.helpers.zenoh_net import ZenohNet
@@ -51,6 +52,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
+    if item.get_closest_marker("sitl") is not None:
+        why = sitl.unavailable()  # the user's own SITL build: skipped, never failed, without it
+        if why is not None:
+            pytest.skip(why)
     for name in REQUIREMENTS:
         if item.get_closest_marker(name) is None:
             continue

@@ -21,6 +21,7 @@ from aeroweaver_edge.cli.checks import int_in
 from aeroweaver_edge.config import MAX_UAVS
 from aeroweaver_edge.contracts.endpoints import endpoint_arg, is_host
 from aeroweaver_edge.contracts.errors import UserError
+from aeroweaver_edge.provision import sitl
 from aeroweaver_edge.provision.daemon_toml import VEHICLE_PORT, VEHICLES
 
 MAX_DAYS = 3650  # ten years: longer is a typo (and keys should be rotated long before)
@@ -83,7 +84,8 @@ def add_parsers(sub: Any) -> None:
         "--vehicle", choices=VEHICLES, default="sim",
         help="the daemons' vehicle link: sim (wait for a simulated world, mission start "
         "--sim-world), emulator (`aeroweaver emulator --uavs N` on this machine; needs "
-        "--loopback), mavlink or mavsdk (a real autopilot sending to udpin://0.0.0.0:"
+        "--loopback), sitl (your own ArduCopter SITL build, one instance per UAV on this "
+        "machine; needs --loopback), mavlink or mavsdk (a real autopilot sending to udpin://0.0.0.0:"
         "VEHICLE_PORT, or VEHICLE_PORT+N with --loopback)",
     )  # fmt: skip
     ki.add_argument(
@@ -215,9 +217,9 @@ def _plan(args: argparse.Namespace, members: dict[str, Any]) -> _Plan:
         )
     if args.loopback and args.no_router:
         raise UserError("--loopback rehearses the field shape with its router: drop --no-router")
-    if args.vehicle == "emulator" and not args.loopback:
+    if args.vehicle in ("emulator", "sitl") and not args.loopback:
         raise UserError(
-            "--vehicle emulator: the emulator serves every vehicle from one machine",
+            f"--vehicle {args.vehicle}: the rehearsal runs every vehicle on this machine",
             "add --loopback (or use --vehicle mavlink for real autopilots)",
         )
     for ep in [*([args.listen] if args.listen else []), *args.connect]:
@@ -256,7 +258,7 @@ def _plan(args: argparse.Namespace, members: dict[str, Any]) -> _Plan:
 def _selector(args: argparse.Namespace) -> str:
     if args.selector is not None:
         return str(args.selector)
-    return "scripted" if args.vehicle == "emulator" else "llm"
+    return "scripted" if args.vehicle in ("emulator", "sitl") else "llm"
 
 
 def _uav_number(name: str) -> int:
@@ -344,6 +346,8 @@ def _write_swarm(
             write_file(d / "mesh.toml", text.encode())
     text = swarm_toml(args.swarm, plan.ground_connect, args.namespace)
     write_file(tmp / SWARM_FILE, text.encode())
+    if args.vehicle == "sitl":  # the SITL instances' --defaults (not a secret)
+        write_file(tmp / sitl.PARAMS_FILE, sitl.params_text().encode())
 
 
 def _print_done(out: Path, args: argparse.Namespace, members: dict[str, Any], plan: _Plan) -> None:
@@ -358,6 +362,8 @@ def _print_done(out: Path, args: argparse.Namespace, members: dict[str, Any], pl
         "sim": "wait for a simulated world (mission start --sim-world)",
         "emulator": f"aeroweaver emulator --uavs {len(uavs)}"
         + (f" --port-base {args.vehicle_port}" if args.vehicle_port != VEHICLE_PORT else ""),
+        "sitl": f"your ArduCopter SITL build, one instance per UAV (the command is in each "
+        f"uav.toml; defaults file {out / sitl.PARAMS_FILE})",
         "mavlink": "MAVLink from the autopilot",
         "mavsdk": "MAVSDK to the autopilot",
     }[args.vehicle]

@@ -15,8 +15,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel
 
-Vehicle = Literal["sim", "emulator", "mavlink", "mavsdk"]
-VEHICLES: tuple[Vehicle, ...] = ("sim", "emulator", "mavlink", "mavsdk")
+Vehicle = Literal["sim", "emulator", "sitl", "mavlink", "mavsdk"]
+VEHICLES: tuple[Vehicle, ...] = ("sim", "emulator", "sitl", "mavlink", "mavsdk")
 VEHICLE_PORT = 14540  # PX4 SITL convention: instance i sends MAVLink to 14540 + i
 # The emulator flies in an empty field: these are the demo's landmarks (configs/uav-emulator.toml).
 DEMO_POINTS: tuple[dict[str, Any], ...] = (
@@ -136,6 +136,16 @@ COMMENTS: dict[str, tuple[str, str]] = {
     "vehicle.failsafe_policy": ("autopilot failsafe parameters off-profile: refuse or warn", ""),
     "vehicle.upload_fence": ("the [safety] geofence becomes the autopilot's fence too", ""),
     "vehicle.end_action": ("at mission end or operator stop: land or return", ""),
+    "vehicle.companion_failsafe": (
+        "what the autopilot does when this daemon falls silent (set at preflight): land, "
+        "return, or check (write nothing, only verify)",
+        "",
+    ),
+    "vehicle.companion_loss_s": ("seconds of daemon silence before that action (2-5)", ""),
+    "vehicle.origin": (
+        "the swarm's shared local frame [lat, lon, alt_m]; unset: the autopilot's own frame",
+        "[47.397742, 8.545594, 488.0]",
+    ),
     "vehicle.on_link_loss": ("when the link comes back: failsafe (hold), land or return", ""),
     "vehicle.takeoff_timeout_s": ("seconds a take-off may take", ""),
     "vehicle.sim_world": ("fly a real link inside the simulated world (sim --link)", ""),

@@ -19,7 +19,7 @@ from pydantic import BaseModel
 
 from aeroweaver_edge.config import MeshConfig, UavConfig, parse_config
 from aeroweaver_edge.mesh.session import load_mesh_security, zenoh_settings
-from aeroweaver_edge.provision import daemon_toml
+from aeroweaver_edge.provision import daemon_toml, sitl
 from aeroweaver_edge.provision.daemon_toml import DEMO_POINTS, VEHICLE_PORT, Vehicle
 from aeroweaver_edge.security.identity import SwarmPki
 from aeroweaver_edge.security.policy import Role
@@ -85,7 +85,7 @@ def zenoh_json5(pki: SwarmPki, cfg: MeshConfig, name: str) -> str:
 def vehicle_url(vehicle: Vehicle, index: int, *, loopback: bool, port: int = VEHICLE_PORT) -> str:
     """Where a daemon hears its autopilot: on one machine vehicle i sends to ``port + i``
     (the emulator, PX4 SITL); on its own companion computer every UAV uses ``port``."""
-    if vehicle == "emulator" or loopback:
+    if vehicle in ("emulator", "sitl") or loopback:
         return f"udpin://127.0.0.1:{port + index}"
     return f"udpin://0.0.0.0:{port}"
 
@@ -111,7 +111,9 @@ def uav_config(
         backend = "mavsdk" if vehicle == "mavsdk" else "mavlink"
         url = vehicle_url(vehicle, index, loopback=loopback, port=vehicle_port)
         data["vehicle"] = {"backend": backend, "url": url}
-    if vehicle == "emulator":
+    if vehicle == "sitl":  # one shared frame: the instances boot 5 m apart
+        data["vehicle"].update(personality="ardupilot", origin=list(sitl.ORIGIN))
+    if vehicle in ("emulator", "sitl"):
         data["field"] = {"points": list(DEMO_POINTS)}
     return parse_config(data, UavConfig, f"{uav} uav.toml")
 
@@ -138,6 +140,16 @@ def uav_toml(cfg: UavConfig, vehicle: Vehicle = "sim", keys: str = "DIR") -> str
             f"emulated autopilot {cfg.uav_index} of `aeroweaver emulator --uavs N` (system "
             f"{cfg.uav_index + 1}); it sends MAVLink to {cfg.vehicle.url}",
         ]
+    elif vehicle == "sitl":
+        port = (cfg.vehicle.url or "").rsplit(":", 1)[-1]
+        parm = Path(keys).resolve() / sitl.PARAMS_FILE
+        argv = sitl.command(cfg.uav_index, f"127.0.0.1:{port}", defaults=str(parm))
+        note = [
+            f"ArduCopter SITL instance {cfg.uav_index} (system {cfg.uav_index + 1}), your own "
+            "build, started in a directory of its own:",
+            "  " + " ".join(argv),
+            "origin: the shared frame of all instances (instance N boots 5 m east of N-1).",
+        ]
     else:
         note = [
             f"the autopilot sends MAVLink to {cfg.vehicle.url}; rounds run on the wall clock,",
@@ -145,8 +157,8 @@ def uav_toml(cfg: UavConfig, vehicle: Vehicle = "sim", keys: str = "DIR") -> str
         ]
     notes["vehicle"] = note
     header += note
-    if vehicle == "emulator":
-        notes["field"] = ["the emulator's field is empty: these demo landmarks are the points"]
+    if vehicle in ("emulator", "sitl"):
+        notes["field"] = [f"the {vehicle}'s field is empty: these demo landmarks are the points"]
     if cfg.agent.selector == "scripted":
         notes["agent"] = [
             'selector "scripted": the task\'s reference policy decides, not an LLM (a rehearsal '

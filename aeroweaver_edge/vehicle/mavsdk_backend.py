@@ -31,6 +31,7 @@ from aeroweaver_edge.contracts.observation import VehicleState
 from aeroweaver_edge.contracts.ports import Health
 from aeroweaver_edge.contracts.wire import VehicleStatus
 from aeroweaver_edge.vehicle.errors import VehicleError
+from aeroweaver_edge.vehicle.mavlink import companion_failsafe
 from aeroweaver_edge.vehicle.mavlink.geo import GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.personality import PERSONALITIES, ParamRule
 
@@ -268,10 +269,32 @@ class MavsdkVehicle:
                 return float(await self._call(functools.partial(getter, name)))
         return None
 
+    async def get(self, name: str) -> float | None:
+        """``companion_failsafe.Params``: a parameter by name (None: not answered)."""
+        return await self._read_param(name)
+
+    async def set(self, name: str, value: float) -> float:
+        """``companion_failsafe.Params``: write as an int, else as a float; the value read back."""
+        p = self._param
+        try:
+            await self._call(functools.partial(p.set_param_int, name, int(value)))
+            return float(await self._call(functools.partial(p.get_param_int, name)))
+        except VehicleError:
+            await self._call(functools.partial(p.set_param_float, name, float(value)))
+            return float(await self._call(functools.partial(p.get_param_float, name)))
+
     async def _preflight(self) -> None:
         from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon
 
-        pers = PERSONALITIES["px4"]()  # MAVSDK maps ArduPilot itself; PX4 names are checked
+        # MAVSDK maps modes itself; the failsafe names checked are PX4's (docs/flight.md)
+        fs = await companion_failsafe.configure(
+            self, "px4", self.sysid, self.cfg.companion_failsafe, self.cfg.companion_loss_s
+        )
+        self.problems.extend(fs.problems)
+        if fs.ok:
+            done = f" (set {', '.join(fs.changed)})" if fs.changed else " (as found)"
+            log.info("%s: companion-loss failsafe: %s%s", self.name, fs.summary, done)
+        pers = PERSONALITIES["px4"]()
         rules: tuple[ParamRule, ...] = pers.failsafe_rules
         for rule in rules:
             problem = rule.check(await self._read_param(rule.name))

@@ -96,12 +96,13 @@ def bad_values(annotation: Any) -> list[tuple[str, Any]]:
         return [("huge", 2**63 - 1), ("-huge", -(2**63)), ("inf", math.inf), ("nan", math.nan)]
     if annotation is float:
         return [("inf", math.inf), ("-inf", -math.inf), ("nan", math.nan), ("huge", 1e300)]
-    # a pair: each bad value in either place, the other one ordinary
+    # a pair (or a longer tuple): each bad value first or last, the others ordinary
+    n = len(typing.get_args(annotation))
     return [
-        (f"{where} {what}", (v, 1.0) if where == "low" else (0.0, v))
+        (f"{where} {what}", (v, *[1.0] * (n - 1)) if where == "low" else (*[0.0] * (n - 1), v))
         for what, v in (("inf", math.inf), ("nan", math.nan), ("huge", 1e300))
         for where in ("low", "high")
-    ] + [("both -inf/inf", (-math.inf, math.inf))]
+    ] + [("both -inf/inf", (-math.inf, *[0.0] * (n - 2), math.inf))]
 
 
 CASES = [
@@ -171,6 +172,9 @@ def test_the_minimal_document_itself_is_valid(
         model = found
     info = model.model_fields[name]
     value = info.default if info.default is not None else 1
+    arity = len(typing.get_args(_plain(info.annotation)))
+    if info.default is None and arity:  # an optional tuple: an ordinary one of its length
+        value = (0.0,) * arity
     if section == "field.points":
         value = 0.0
     if value is None or (isinstance(value, tuple) and not value):

@@ -31,6 +31,7 @@ from aeroweaver_edge.world.kinematics import KinematicWorld
 R = mavlink  # short alias for the enums
 ACCEPTED: int = R.MAV_RESULT_ACCEPTED
 DENIED: int = R.MAV_RESULT_DENIED
+FAILED: int = R.MAV_RESULT_FAILED
 UNSUPPORTED: int = R.MAV_RESULT_UNSUPPORTED
 FENCE: int = R.MAV_MISSION_TYPE_FENCE
 ON_GROUND: int = R.MAV_LANDED_STATE_ON_GROUND
@@ -59,6 +60,7 @@ class Faults:
     deaf: bool = False  # hear nothing at all
     no_autopilot_version: bool = False
     no_params: bool = False
+    locked_params: frozenset[str] = frozenset()  # PARAM_SET echoes the old value (refused)
     slow_commands: dict[int, float] = field(default_factory=dict)  # IN_PROGRESS, then final
 
 
@@ -114,6 +116,7 @@ class EmulatedAutopilot:
         signing_key: bytes | None = None,
         faults: Faults | None = None,
         seed: int = 0,
+        prearm_s: float = 0.0,
     ) -> None:
         self.sysid = sysid
         self.uav = uav
@@ -129,7 +132,7 @@ class EmulatedAutopilot:
         self._rng = random.Random(seed * 7919 + sysid)
         table = PX4_PARAMS if personality.name == "px4" else ARDUPILOT_PARAMS
         self.params: dict[str, tuple[float, int]] = dict(table)
-        self.params["MAV_SYS_ID" if personality.name == "px4" else "SYSID_THISMAV"] = (
+        self.params["MAV_SYS_ID" if personality.name == "px4" else "MAV_SYSID"] = (
             sysid,
             PARAM_INT32,
         )
@@ -138,6 +141,7 @@ class EmulatedAutopilot:
                 raise ValueError(f"unknown {personality.name} parameter {name!r}")
             self.params[name] = (value, self.params[name][1])
         self.t0 = time.monotonic()
+        self.prearm_s = prearm_s  # a warm-up (EKF, GPS) in which arming is refused
         self.armed = False
         self.mode = "AUTO.LOITER" if personality.name == "px4" else "STABILIZE"
         self._landed = ON_GROUND
@@ -156,7 +160,13 @@ class EmulatedAutopilot:
         self.events: list[tuple[float, str]] = []
         self.rx = Counter[str]()
         self.foreign = 0  # messages addressed to another system
-        self.intervals = dict(TELEMETRY_S)
+        # PX4 streams its telemetry from boot; ArduPilot only its HEARTBEAT until a client
+        # asks (SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM): its SRn_ rates are 0 (SITL).
+        self.intervals = (
+            dict(TELEMETRY_S)
+            if personality.name == "px4"
+            else {R.MAVLINK_MSG_ID_HEARTBEAT: TELEMETRY_S[R.MAVLINK_MSG_ID_HEARTBEAT]}
+        )
         self._due: dict[int, float] = {}
         self._dup: dict[tuple[int, int, int], tuple[tuple[float, ...], float, int]] = {}
         self._upload: _Upload | None = None
@@ -165,7 +175,7 @@ class EmulatedAutopilot:
         self._last_tick = time.monotonic()
         self._guided_stopped = False
         self._text_id = 0
-        self.gcs_seen_at: float | None = None  # ArduPilot: last HEARTBEAT from SYSID_MYGCS
+        self.gcs_seen_at: float | None = None  # ArduPilot: last HEARTBEAT from MAV_GCS_SYSID
         self.gcs_failsafe = False
 
     # -- helpers ---------------------------------------------------------------------------
@@ -271,6 +281,8 @@ class EmulatedAutopilot:
                     self._send_param(name, i)
         elif kind == "PARAM_SET":
             self._on_param_set(msg)
+        elif kind == "REQUEST_DATA_STREAM":
+            self._on_data_stream(msg)
         elif kind == "MISSION_COUNT":
             self._on_mission_count(msg)
         elif kind == "MISSION_ITEM_INT":
@@ -296,8 +308,19 @@ class EmulatedAutopilot:
                 )
             )
 
+    def _on_data_stream(self, msg: Message) -> None:
+        """REQUEST_DATA_STREAM (what MAVProxy and QGroundControl send ArduPilot): start
+        streams every telemetry message at its usual rate; stop leaves the HEARTBEAT."""
+        if msg.start_stop and msg.req_message_rate > 0:
+            for msg_id, period in TELEMETRY_S.items():
+                self.intervals.setdefault(msg_id, period)
+        elif not msg.start_stop:
+            self.intervals = {R.MAVLINK_MSG_ID_HEARTBEAT: TELEMETRY_S[R.MAVLINK_MSG_ID_HEARTBEAT]}
+
     def _on_heartbeat(self, msg: Message) -> None:
-        if self.p.name == "ardupilot" and msg.get_srcSystem() == int(self.param("SYSID_MYGCS")):
+        # Any component of the GCS system counts (GCS_MAVLINK::handle_heartbeat): a daemon
+        # that set MAV_GCS_SYSID to the vehicle's own id is its GCS of record.
+        if self.p.name == "ardupilot" and msg.get_srcSystem() == int(self.param("MAV_GCS_SYSID")):
             self.gcs_seen_at = time.monotonic()
 
     def _on_ftp(self, msg: Message) -> None:
@@ -343,8 +366,46 @@ class EmulatedAutopilot:
         if kind == "velocity":
             self.goto_target = None
             self.world.set_velocity(self.uav, (a, b))
+            self._avoid_fence()  # not even one tick toward the fence
+        elif self._fenced_out(a, b):
+            self._event(f"guided target N {a:.1f} E {b:.1f} outside the fence: ignored")
         else:
             self.goto_target = (a, b)
+
+    def _fenced_out(self, n: float, e: float) -> bool:
+        """ArduCopter's GUIDED refuses a destination outside its enabled fence
+        (``ModeGuided::set_destination``: ``check_destination_within_fence``)."""
+        return (
+            self.p.name == "ardupilot"
+            and self.param("FENCE_ENABLE") >= 1
+            and bool(self.fence)
+            and not self._inside_fence(n, e)
+        )
+
+    def _avoid_fence(self) -> None:
+        """ArduCopter's simple avoidance (AVOID_ENABLE fence bit) in GUIDED velocity
+        control: a velocity toward the fence stops FENCE_MARGIN short of it (recorded from
+        SITL: 3 m/s north at a fence 8 m north stopped at 6.2 m)."""
+        if (
+            self.p.name != "ardupilot"
+            or self.landed != IN_AIR
+            or self._role() != "offboard"
+            or self.goto_target is not None
+            or self.param("FENCE_ENABLE") < 1
+            or not self.fence
+            or not int(self.param("AVOID_ENABLE")) & 2
+        ):
+            return
+        b = self.world.body(self.uav)
+        vn, ve = (b.vn, b.ve) if b.speed >= 0.05 else (b.sp_n, b.sp_e)
+        speed = math.hypot(vn, ve)
+        if speed < 0.05:
+            return
+        # the margin plus the distance it takes to brake at the world's acceleration limit
+        reach = self.param("FENCE_MARGIN") + b.speed**2 / (2 * self.world.max_accel)
+        ahead = (b.north + vn / speed * reach, b.east + ve / speed * reach)
+        if self._inside_fence(b.north, b.east) and not self._inside_fence(*ahead):
+            self.world.hold(self.uav)
 
     # -- commands ----------------------------------------------------------------------------
 
@@ -453,11 +514,23 @@ class EmulatedAutopilot:
             return ACCEPTED
         return UNSUPPORTED
 
+    @property
+    def prearm_ready(self) -> bool:
+        """The autopilot's arming checks pass (the SYS_STATUS pre-arm bit)."""
+        return time.monotonic() - self.t0 >= self.prearm_s
+
     def _arm(self, arm: bool, force: bool) -> int:
         if arm:
+            if not self.armed and not self.prearm_ready and not force:
+                if self.p.name == "ardupilot":  # ArduCopter: FAILED, and why (AP_Arming)
+                    self._statustext(*texts.AP_ARM_NOT_READY)
+                self._event("arming refused: checks not passed")
+                return FAILED
             if not self.armed:
                 self.armed = True
                 self._event("armed")
+                if self.p.name == "ardupilot":
+                    self._statustext(*texts.AP_ARMING)
                 self.send_heartbeat()
             return ACCEPTED
         if self.landed != ON_GROUND and not force:
@@ -469,6 +542,8 @@ class EmulatedAutopilot:
         if self.armed:
             self.armed = False
             self._event(f"disarmed ({why})")
+            if self.p.name == "ardupilot":
+                self._statustext(*texts.AP_DISARMING)
             self.send_heartbeat()
 
     def _takeoff(self, param7: float) -> int:
@@ -540,6 +615,8 @@ class EmulatedAutopilot:
 
     def _guided_goto(self, n: float, e: float, *, change_mode: bool) -> int:
         """ArduCopter's GUIDED position target: the vehicle flies there and stays GUIDED."""
+        if self._fenced_out(n, e):
+            return FAILED  # handle_command_int_do_reposition: set_destination refused
         if self.mode != "GUIDED":
             if not change_mode:
                 return DENIED
@@ -578,8 +655,9 @@ class EmulatedAutopilot:
             return
         ptype = self.params[name][1]
         value = self.p.decode_param(float(msg.param_value), ptype)
-        self.params[name] = (value, ptype)
-        self._event(f"param {name} = {value:g}")
+        if name not in self.faults.locked_params:
+            self.params[name] = (value, ptype)
+            self._event(f"param {name} = {value:g}")
         self._send_param(name, list(self.params).index(name))
 
     # -- mission protocol (fence) -----------------------------------------------------------
@@ -630,6 +708,8 @@ class EmulatedAutopilot:
         self._upload = None
         self.breached = False
         self._event(f"fence uploaded: {len(self.fence)} items")
+        if self.p.name == "ardupilot":
+            self._statustext(*texts.AP_FENCE_LOADED)
         self._send(self.mav.mission_ack_encode(up.src[0], up.src[1], R.MAV_MISSION_ACCEPTED, FENCE))
 
     def _on_guided_request(self, msg: Message) -> None:
@@ -705,6 +785,8 @@ class EmulatedAutopilot:
         body = self.world.body(self.uav)
         inside = self._inside_fence(body.north, body.east)
         if inside:
+            if self.breached and self.p.name == "ardupilot":
+                self._statustext(*texts.AP_FENCE_CLEARED)
             self.breached = False
             return
         if self.breached:
@@ -756,6 +838,7 @@ class EmulatedAutopilot:
         self._gcs_failsafe(now)
         self._vertical(dt)
         self._guidance()
+        self._avoid_fence()
         self._check_fence()
         for due, command, src in [s for s in self._slow if s[0] <= now]:
             self._slow.remove((due, command, src))
@@ -803,7 +886,7 @@ class EmulatedAutopilot:
             self.world.hold(self.uav)
 
     def _gcs_failsafe(self, now: float) -> None:
-        """ArduCopter's GCS failsafe: armed only once SYSID_MYGCS was heard; after
+        """ArduCopter's GCS failsafe: armed only once MAV_GCS_SYSID was heard; after
         FS_GCS_TIMEOUT of silence FS_GCS_ENABLE decides (1, 2: RTL; 3 SmartRTL and 6 Auto
         RTL, unavailable here: RTL; 4 SmartRTL, unavailable: land; 5: land; 7: brake).
         The daemon heartbeats with the vehicle's own system id, so it never counts."""
@@ -854,9 +937,12 @@ class EmulatedAutopilot:
                     self.set_mode("AUTO.LOITER", "takeoff complete")
                 else:
                     self.send_heartbeat()
-        elif self.landed == LANDING or (self._role() == "rtl" and self._at_home()):
+        elif self.landed == LANDING or (
+            self.landed == IN_AIR and self._role() == "rtl" and self._at_home()
+        ):
             if self.landed != LANDING:
                 self.landed = LANDING
+                self.world.hold(self.uav)  # over home: straight down, no drift
             down = (
                 self.param("MPC_LAND_SPEED")
                 if self.p.name == "px4"

@@ -5,12 +5,14 @@ from __future__ import annotations
 from aeroweaver_edge.vehicle.mavlink.codec import mavlink as R
 from aeroweaver_edge.vehicle.mavlink.personality import PARAM_INT32, PARAM_REAL32
 
-# Parameter name -> (value, type). PX4's COM_OBL_RC_ACT factory default is 0 (Position
-# mode: hands control to RC sticks); the emulator starts with the project's approved
-# profile (5 = Hold) and ``--param`` can set the factory value to see the check refuse.
+# Parameter name -> (value, type), as the firmware ships them: PX4's COM_OBL_RC_ACT 0
+# (Position mode: hands control to RC sticks), ArduCopter's FS_GCS_ENABLE 0 (no GCS
+# failsafe), FENCE_ENABLE 0. The daemon sets its companion-loss failsafe at preflight
+# (vehicle/mavlink/companion_failsafe.py). ArduPilot names as in 4.7 (MAV_SYSID,
+# MAV_GCS_SYSID; SYSID_THISMAV and SYSID_MYGCS before).
 PX4_PARAMS: dict[str, tuple[float, int]] = {
     "COM_OF_LOSS_T": (1.0, PARAM_REAL32),
-    "COM_OBL_RC_ACT": (5, PARAM_INT32),
+    "COM_OBL_RC_ACT": (0, PARAM_INT32),
     "GF_ACTION": (2, PARAM_INT32),
     "GF_MAX_HOR_DIST": (0.0, PARAM_REAL32),
     "GF_MAX_VER_DIST": (0.0, PARAM_REAL32),
@@ -22,17 +24,19 @@ PX4_PARAMS: dict[str, tuple[float, int]] = {
     "MAV_SYS_ID": (1, PARAM_INT32),
 }
 ARDUPILOT_PARAMS: dict[str, tuple[float, int]] = {
-    "FENCE_ENABLE": (1, PARAM_INT32),
+    "FENCE_ENABLE": (0, PARAM_INT32),
     "FENCE_TYPE": (7, PARAM_INT32),
     "FENCE_ACTION": (1, PARAM_INT32),
-    "FS_GCS_ENABLE": (1, PARAM_INT32),
+    "FENCE_MARGIN": (2.0, PARAM_REAL32),
+    "AVOID_ENABLE": (3, PARAM_INT32),  # fence + proximity: GUIDED velocity stops short
+    "FS_GCS_ENABLE": (0, PARAM_INT32),
     "FS_GCS_TIMEOUT": (5.0, PARAM_REAL32),
-    "SYSID_MYGCS": (255, PARAM_INT32),
+    "MAV_GCS_SYSID": (255, PARAM_INT32),
     "GUID_TIMEOUT": (3.0, PARAM_REAL32),
     "WPNAV_SPEED_UP": (250.0, PARAM_REAL32),
     "LAND_SPEED": (50.0, PARAM_REAL32),
     "RTL_ALT": (1500.0, PARAM_REAL32),
-    "SYSID_THISMAV": (1, PARAM_INT32),
+    "MAV_SYSID": (1, PARAM_INT32),
 }
 
 TELEMETRY_S: dict[int, float] = {

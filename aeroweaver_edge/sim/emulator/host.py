@@ -48,6 +48,7 @@ class EmulatorOptions:
     spacing_m: float = 5.0  # standalone layout: a row along east
     origin: GeoOrigin = DEFAULT_ORIGIN
     seed: int = 0
+    prearm_s: float = 0.0  # ArduPilot: arming checks fail this long after boot (EKF, GPS)
     remote_ports: Sequence[int] | None = None  # override port_base + i per vehicle (tests)
 
     def __post_init__(self) -> None:
@@ -109,6 +110,7 @@ class EmulatorHost:
                     signing_key=key,
                     faults=faults[i] if faults is not None and i < len(faults) else None,
                     seed=opts.seed,
+                    prearm_s=opts.prearm_s,
                 )
             )
         self._tasks: list[asyncio.Task[None]] = []

@@ -36,6 +36,9 @@ class TelemetrySource(Protocol):
     def landed(self) -> int: ...
 
     @property
+    def prearm_ready(self) -> bool: ...
+
+    @property
     def mav(self) -> Any: ...
 
     @property
@@ -105,7 +108,8 @@ def encode(ap: TelemetrySource, msg_id: int) -> Message | None:
             | R.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
             | R.MAV_SYS_STATUS_SENSOR_GPS
         )
-        present = enabled = health = sensors | R.MAV_SYS_STATUS_PREARM_CHECK
+        present = enabled = sensors | R.MAV_SYS_STATUS_PREARM_CHECK
+        health = sensors | (R.MAV_SYS_STATUS_PREARM_CHECK * ap.prearm_ready)
         fence_present, fence_enabled, fence_healthy = fence_bits(ap)
         present |= R.MAV_SYS_STATUS_GEOFENCE * fence_present
         enabled |= R.MAV_SYS_STATUS_GEOFENCE * fence_enabled

@@ -27,6 +27,11 @@ Text = tuple[int, str]
 
 PX4_FAILSAFE: Text = (R.MAV_SEVERITY_CRITICAL, "Failsafe activated\t")
 PX4_LAND: Text = (R.MAV_SEVERITY_INFO, "Landing at current position\t")
+AP_ARMING: Text = (R.MAV_SEVERITY_INFO, "Arming motors")  # AP_Arming, recorded from SITL
+AP_DISARMING: Text = (R.MAV_SEVERITY_INFO, "Disarming motors")
+AP_ARM_NOT_READY: Text = (R.MAV_SEVERITY_CRITICAL, "Arm: AHRS: waiting for home")
+AP_FENCE_LOADED: Text = (R.MAV_SEVERITY_DEBUG, "Fence Indexed OK")  # AC_PolyFence_loader
+AP_FENCE_CLEARED: Text = (R.MAV_SEVERITY_NOTICE, "Fence breach cleared")  # Copter fence.cpp
 AP_FENCE_BREACH: Text = (R.MAV_SEVERITY_NOTICE, "Polygon fence breached")
 AP_GCS_FAILSAFE: Text = (R.MAV_SEVERITY_WARNING, "GCS Failsafe")
 AP_GCS_FAILSAFE_DISARM: Text = (R.MAV_SEVERITY_WARNING, "GCS Failsafe - Disarming")

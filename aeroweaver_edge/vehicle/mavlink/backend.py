@@ -25,6 +25,7 @@ from aeroweaver_edge.contracts.ports import Health
 from aeroweaver_edge.contracts.wire import VehicleStatus
 from aeroweaver_edge.runtime.lifecycle import cancel_all
 from aeroweaver_edge.vehicle.errors import VehicleError
+from aeroweaver_edge.vehicle.mavlink import companion_failsafe
 from aeroweaver_edge.vehicle.mavlink.codec import Message, mavlink
 from aeroweaver_edge.vehicle.mavlink.commands import CommandClient, CommandError
 from aeroweaver_edge.vehicle.mavlink.fence import rectangle, upload_fence
@@ -56,12 +57,16 @@ IN_AIR_STATES = {
     mavlink.MAV_LANDED_STATE_TAKEOFF,
     mavlink.MAV_LANDED_STATE_LANDING,
 }
-TELEMETRY = {  # message id -> interval (us) we ask for; PX4 streams these anyway
+TELEMETRY = {  # message id -> interval (us) we ask for; PX4 streams these anyway, ArduPilot
+    # only what a client asks for (its SRn_ rates are 0 on a fresh SITL)
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1_000_000,  # battery and the pre-arm bit
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 100_000,
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 100_000,
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1_000_000,
     mavlink.MAVLINK_MSG_ID_HOME_POSITION: 1_000_000,
 }
+PREARM_CHECK = mavlink.MAV_SYS_STATUS_PREARM_CHECK
+REASK_S = 5.0  # telemetry intervals asked again while no position flows
 PRESTREAM_S = 0.5  # zero setpoints streamed before offboard is requested (PX4 needs > 2 Hz)
 MODE_CONFIRM_S = 3.0  # three 1 Hz heartbeats: a lost one must not fail the command
 
@@ -71,6 +76,7 @@ class PreflightReport:
     problems: list[str] = field(default_factory=list)
     params: dict[str, float | None] = field(default_factory=dict)
     fence_uploaded: bool = False
+    companion_failsafe: companion_failsafe.FailsafeReport | None = None
 
     @property
     def ok(self) -> bool:
@@ -104,12 +110,16 @@ class MavlinkVehicle:
         )
         self.preflight = PreflightReport()
         self.refused: str | None = None
-        self.origin: GeoOrigin | None = None
+        self.origin: GeoOrigin | None = None  # the autopilot's local frame, geodetic
+        self.frame = GeoOrigin(*cfg.origin) if cfg.origin is not None else None
+        self.offset = (0.0, 0.0, 0.0)  # the autopilot's local origin in the swarm frame
         self._action = asyncio.Lock()  # one mode change / action at a time
         self._stamp: TimestampStore | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._t0 = time.monotonic()
         self.motion_refused = 0
+        self.arm_check: str | None = None  # the autopilot's last "PreArm: ..." / "Arm: ..." text
+        self.link.on("STATUSTEXT", self._on_text)
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -171,6 +181,31 @@ class MavlinkVehicle:
             "ok" if self.preflight.ok else f"{len(self.preflight.problems)} problem(s)",
         )
 
+    def _on_text(self, msg: Message) -> None:
+        text = str(msg.text).rstrip("\x00").strip()
+        if text.startswith(("PreArm:", "Arm:")):
+            self.arm_check = text[:120]
+
+    @property
+    def prearm_ok(self) -> bool | None:
+        """The autopilot's own arming checks (SYS_STATUS pre-arm bit); None: not reported."""
+        sys: Message | None = self.link.last.get("SYS_STATUS")
+        if sys is None or not sys.onboard_control_sensors_present & PREARM_CHECK:
+            return None
+        return bool(sys.onboard_control_sensors_health & PREARM_CHECK)
+
+    async def _wait_arming_checks(self) -> None:
+        """EKF, GPS and every arming check as the autopilot judges them: wait for its pre-arm
+        bit (ArduPilot reports one; PX4 does not), or refuse naming the check that failed."""
+        deadline = time.monotonic() + self.cfg.connect_timeout_s
+        while self.prearm_ok is False:
+            if time.monotonic() > deadline:
+                raise VehicleError(
+                    f"{self.name}: arming checks not passed within "
+                    f"{self.cfg.connect_timeout_s:g} s: {self.arm_check or 'no reason given'}"
+                )
+            await asyncio.sleep(0.1)
+
     async def aclose(self) -> None:
         self.stream.stop()
         await self.stream.aclose()
@@ -200,22 +235,45 @@ class MavlinkVehicle:
                 )
 
     async def _wait_telemetry(self, timeout_s: float) -> None:
+        """Until LOCAL_POSITION_NED flows; the intervals are asked again every few seconds
+        (a booting ArduCopter streams it only once its EKF has an origin, about 20 s in
+        SITL, and one of three instances never started it after the first request)."""
         deadline = time.monotonic() + timeout_s
+        ask_again = time.monotonic() + REASK_S
         while self.link.age("LOCAL_POSITION_NED") == math.inf:
-            if time.monotonic() > deadline:
+            now = time.monotonic()
+            if now > deadline:
                 raise VehicleError(f"{self.name}: no LOCAL_POSITION_NED within {timeout_s:g} s")
+            if now > ask_again:
+                ask_again = now + REASK_S
+                self._tasks.append(
+                    asyncio.create_task(self._ask_telemetry(), name=f"{self.name}-reask")
+                )
             await asyncio.sleep(0.02)
 
     # -- preflight: failsafe parameters and geofence -----------------------------------------
 
     async def _preflight(self) -> PreflightReport:
         rep = PreflightReport()
+        await self._companion_failsafe(rep)
+        if self.cfg.upload_fence and self.cfg.companion_failsafe != "check":
+            await self._enable_fence()
         for rule in self.personality.failsafe_rules:
             value = await self.params.get(rule.name)
             rep.params[rule.name] = value
             problem = rule.check(value)
             if problem:
                 rep.problems.append(problem)
+        if self.frame is not None:
+            local = await self._origin()
+            if local is None:
+                rep.problems.append(
+                    "no global position: cannot place the vehicle in vehicle.origin"
+                )
+            else:
+                self.offset = self.frame.to_local(local.lat_deg, local.lon_deg, local.alt_m)
+                log.info("%s: local frame origin at N %.2f E %.2f D %.2f of vehicle.origin",
+                         self.name, *self.offset)  # fmt: skip
         if self.cfg.upload_fence:
             origin = await self._origin()
             if origin is None:
@@ -225,7 +283,7 @@ class MavlinkVehicle:
                 try:
                     await upload_fence(
                         self.link,
-                        rectangle(origin, s.geofence_north_m, s.geofence_east_m),
+                        rectangle(self.frame or origin, s.geofence_north_m, s.geofence_east_m),
                         timeout_s=self.cfg.command_timeout_s,
                         retries=self.cfg.command_retries,
                     )
@@ -233,6 +291,40 @@ class MavlinkVehicle:
                 except LinkError as exc:
                     rep.problems.append(f"geofence not uploaded: {exc}")
         return rep
+
+    async def _enable_fence(self) -> None:
+        """ArduCopter ships with its fence off (FENCE_ENABLE 0): the daemon that uploads the
+        fence turns it on, so the autopilot enforces the same fence as the gate. A vehicle
+        that will not take it fails the FENCE_ENABLE rule below, by name."""
+        if self.personality.name != "ardupilot":
+            return
+        found = await self.params.get("FENCE_ENABLE")
+        if found is None or found == 1.0:
+            return
+        with contextlib.suppress(LinkError):
+            now = await self.params.set("FENCE_ENABLE", 1.0)
+            log.info("%s: autopilot fence: FENCE_ENABLE %g -> %g", self.name, found, now)
+
+    async def _companion_failsafe(self, rep: PreflightReport) -> None:
+        """Make the autopilot land or return on the daemon's silence; say what was set."""
+        assert self.link.sysid is not None
+        fs = await companion_failsafe.configure(
+            self.params,
+            self.personality.name,
+            self.link.sysid,
+            self.cfg.companion_failsafe,
+            self.cfg.companion_loss_s,
+        )
+        rep.params.update(fs.values)
+        rep.problems.extend(fs.problems)
+        rep.companion_failsafe = fs
+        if fs.ok:
+            log.info(
+                "%s: companion-loss failsafe: %s%s",
+                self.name,
+                fs.summary,
+                f" (set {', '.join(fs.changed)})" if fs.changed else " (as found)",
+            )
 
     async def _origin(self) -> GeoOrigin | None:
         """The local frame's geodetic origin, from one global + local position pair."""
@@ -281,8 +373,9 @@ class MavlinkVehicle:
         loc: Message | None = self.link.last.get("LOCAL_POSITION_NED")
         if loc is None:
             raise VehicleError(f"{self.name}: no position telemetry yet")
+        n, e, d = self.offset
         return VehicleState(
-            (float(loc.x), float(loc.y), float(loc.z)),
+            (float(loc.x) + n, float(loc.y) + e, float(loc.z) + d),
             (float(loc.vx), float(loc.vy), float(loc.vz)),
             armed=self.armed,
             in_air=self.in_air,
@@ -297,8 +390,9 @@ class MavlinkVehicle:
         battery = None if sys is None or sys.battery_remaining < 0 else float(sys.battery_remaining)
         hb = self.link.heartbeat
         hb_age = None if hb is None else time.monotonic() - self.link.heartbeat_at
+        n, e, d = self.offset
         return VehicleStatus(
-            pos=(float(loc.x), float(loc.y), float(loc.z)),
+            pos=(float(loc.x) + n, float(loc.y) + e, float(loc.z) + d),
             vel=(float(loc.vx), float(loc.vy), float(loc.vz)),
             armed=self.armed, in_air=self.in_air, mode=self.mode_name[:64],
             battery_pct=battery,
@@ -348,11 +442,17 @@ class MavlinkVehicle:
         if self.in_air:
             raise VehicleError(f"{self.name}: refusing to arm a vehicle that reports in air")
         async with self._action:
+            await self._wait_arming_checks()
             if self.personality.name == "ardupilot":
                 await self._set_mode("takeoff")  # Copter arms and takes off in GUIDED
-            await self.commands.send(
-                mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, done=lambda: self.armed
-            )
+            self.link.beat()  # the companion-loss failsafe is armed before the vehicle is
+            try:
+                await self.commands.send(
+                    mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0, done=lambda: self.armed
+                )
+            except CommandError as exc:
+                why = f": {self.arm_check}" if self.arm_check else ""
+                raise VehicleError(f"{self.name}: {exc}{why}") from None
             await self.wait_until(lambda: self.armed, MODE_CONFIRM_S, "arming")
 
     async def takeoff(self, altitude_m: float) -> None:
@@ -424,7 +524,8 @@ class MavlinkVehicle:
     async def goto(self, north: float, east: float, down: float) -> None:
         if not all(math.isfinite(v) for v in (north, east, down)):
             raise VehicleError(f"{self.name}: non-finite position")
-        await self._motion(Setpoint("position", north, east, down))
+        n, e, d = self.offset  # the swarm frame's target in the autopilot's own frame
+        await self._motion(Setpoint("position", north - n, east - e, down - d))
 
     async def hold(self) -> None:
         self._require_link()

@@ -31,7 +31,7 @@ RESULT_NAMES = {
     for k, v in vars(mavlink).items()
     if k.startswith("MAV_RESULT_") and isinstance(v, int) and k != "MAV_RESULT_ENUM_END"
 }
-NAN = math.nan
+UNUSED = 0.0  # what an unused param carries: MAVLink's "reserved (default: 0)"
 
 
 class CommandError(LinkError):
@@ -92,7 +92,9 @@ class CommandClient:
         as_int: bool,
         frame: int,
     ) -> Message:
-        p = (*params, *([NAN] * (7 - len(params))))[:7]
+        # Unused params are 0, never NaN: ArduPilot converts some to integers, and its SITL
+        # traps the invalid conversion (SIGFPE: a NaN-padded ARM killed the autopilot).
+        p = (*params, *([UNUSED] * (7 - len(params))))[:7]
         sysid, compid = self.link.target
         if as_int:
             return self.link.mav.command_int_encode(

@@ -233,6 +233,11 @@ class FlightLink:
         """The pymavlink encoder (``*_encode`` builders)."""
         return self.codec.mav
 
+    def beat(self) -> None:
+        """One heartbeat now, outside the 1 Hz loop: before arming, so an autopilot that
+        only arms its GCS failsafe once it heard its GCS (ArduCopter) has heard us."""
+        self._send_heartbeat()
+
     def _send_heartbeat(self) -> None:
         self.send(
             self.mav.heartbeat_encode(

@@ -114,13 +114,9 @@ class PX4(Personality):
         "land": "AUTO.LAND",
         "rtl": "AUTO.RTL",
     }
+    # Offboard loss (COM_OF_LOSS_T, COM_OBL_RC_ACT) is the companion-loss failsafe, set and
+    # checked by ``companion_failsafe``.
     failsafe_rules = (
-        ParamRule("COM_OF_LOSS_T", low=0.1, high=3.0, why="offboard loss must be detected fast"),
-        ParamRule(
-            "COM_OBL_RC_ACT",
-            allowed=(3.0, 4.0, 5.0),
-            why="after offboard loss: Return, Land or Hold; 0-2 hand over to RC nobody holds",
-        ),
         ParamRule(
             "GF_ACTION", allowed=(2.0, 3.0, 5.0), why="geofence breach: Hold, Return or Land"
         ),
@@ -183,9 +179,8 @@ class ArduPilot(Personality):
         ParamRule(
             "FENCE_ACTION", allowed=(1.0, 2.0, 4.0), why="breach: RTL/land, land, or brake/land"
         ),
-        ParamRule("FS_GCS_ENABLE", allowed=(1.0, 2.0, 5.0), why="companion loss: RTL, ... or land"),
         ParamRule("GUID_TIMEOUT", low=0.1, high=5.0, why="guided velocity targets must expire"),
-    )
+    )  # the GCS failsafe (FS_GCS_*, MAV_GCS_SYSID) is set and checked by companion_failsafe
     fence_action_param = "FENCE_ACTION"
 
     def set_mode_params(self, mode: str, armed: bool) -> tuple[float, float, float]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+
 import pytest
 
 from aeroweaver_edge.config import SafetyConfig
@@ -36,13 +38,15 @@ async def test_launch_goes_preflight_arm_takeoff_offboard_mission() -> None:
 
 
 async def test_a_restarted_daemon_in_the_air_never_arms_or_takes_off() -> None:
-    async with emulated(1) as (host, [v]):
+    # COM_OF_LOSS_T 3 s (accepted as found): the restart comes before the companion-loss
+    # failsafe lands the vehicle
+    async with emulated(1, params={"COM_OF_LOSS_T": 3.0}) as (host, [v]):
         ap = host.vehicles[0]
         first = FlightPhases(v, uav="uav0", altitude_m=5.0)
         await first.launch()
         url = v.cfg.url
-        await v.aclose()  # the daemon dies; the vehicle stays up (its failsafe holds it)
-        await until(lambda: ap.mode == "AUTO.LOITER", 3, "offboard-loss hold")
+        await v.aclose()  # the daemon dies; the vehicle is still in the air
+        await asyncio.sleep(0.1)  # the socket's close runs on the next loop iteration
         port = int(str(url).rsplit(":", 1)[1])
         v2 = MavlinkVehicle(vehicle_config(port), SafetyConfig(), "uav0")
         await v2.start()
@@ -77,7 +81,8 @@ async def test_link_loss_degrades_and_the_first_command_after_it_is_a_hold() -> 
 
 
 async def test_a_refused_preflight_keeps_the_vehicle_on_the_ground() -> None:
-    async with emulated(1, params={"COM_OBL_RC_ACT": 0}) as (host, [v]):
+    check = {"companion_failsafe": "check"}
+    async with emulated(1, params={"COM_OBL_RC_ACT": 0}, vehicle=check) as (host, [v]):
         p = FlightPhases(v, uav="uav0", altitude_m=5.0)
         assert not await p.launch()
         assert p.phase == Phase.REFUSED

@@ -170,3 +170,42 @@ def test_out_may_be_an_existing_empty_directory(tmp_path: Path) -> None:
     assert init(out, "--loopback", uavs=1) == 0
     assert (out / "uav0" / "uav.toml").is_file()
     assert (out / "ca" / "ca.key").stat().st_mode & 0o077 == 0
+
+
+def test_loopback_sitl_configs_share_one_frame_and_say_how_to_start_each_instance(
+    tmp_path: Path,
+) -> None:
+    from aeroweaver_edge.provision import sitl
+    from aeroweaver_edge.vehicle.mavlink.geo import DEFAULT_ORIGIN
+
+    out = tmp_path / "D"
+    assert init(out, "--loopback", "--vehicle", "sitl", "--vehicle-port", "24540") == 0
+    parm = out / sitl.PARAMS_FILE
+    assert parm.read_text() == sitl.params_text()
+    assert "FS_THR_ENABLE 0\n" in parm.read_text()
+    assert (DEFAULT_ORIGIN.lat_deg, DEFAULT_ORIGIN.lon_deg, DEFAULT_ORIGIN.alt_m) == sitl.ORIGIN
+    for i in range(3):
+        path = out / f"uav{i}" / "uav.toml"
+        cfg = load_config(path, UavConfig)
+        assert cfg.vehicle.backend == "mavlink"
+        assert cfg.vehicle.personality == "ardupilot"
+        assert cfg.vehicle.url == f"udpin://127.0.0.1:{24540 + i}"
+        assert cfg.vehicle.origin == sitl.ORIGIN  # one frame for every instance
+        assert cfg.agent.selector == "scripted"
+        assert [p.id for p in cfg.field.points] == ["L0", "L1", "L2"]
+        flat = path.read_text().replace("\n# ", " ")
+        assert f"--sysid {i + 1} -I {i} --serial0 udpclient:127.0.0.1:{24540 + i}" in flat
+        assert f"--defaults {parm.resolve()}" in flat
+    lat, lon, _ = sitl.home(1)
+    n, e, _ = DEFAULT_ORIGIN.to_local(lat, lon, DEFAULT_ORIGIN.alt_m)
+    assert (round(n, 3), round(e, 3)) == (0.0, sitl.SPACING_M)
+
+
+def test_sitl_without_loopback_is_refused_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert init(tmp_path / "D", "--vehicle", "sitl") == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert "--vehicle sitl: the rehearsal runs every vehicle on this machine" in err
+    assert not (tmp_path / "D").exists()

@@ -41,7 +41,8 @@ async def test_px4_refuses_offboard_without_a_live_setpoint_stream() -> None:
 )
 async def test_offboard_loss_applies_com_obl_rc_act(action: int, mode: str) -> None:
     params = {"COM_OBL_RC_ACT": action, "COM_OF_LOSS_T": 0.3}
-    async with emulated(1, params=params, vehicle={"failsafe_policy": "warn"}) as (host, [v]):
+    as_found = {"failsafe_policy": "warn", "companion_failsafe": "check"}  # nothing rewritten
+    async with emulated(1, params=params, vehicle=as_found) as (host, [v]):
         ap = host.vehicles[0]
         await airborne(v)
         await v.set_velocity(1.0, 0.0, 0.0)

@@ -122,6 +122,8 @@ def ground_station(
         try:
             gcs = Gcs(conn)
             gcs.wait("HEARTBEAT", lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1)
+            # what MAVProxy and QGroundControl do: ArduPilot streams only what is asked for
+            conn.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_ALL, 4, 1)
             yield host, gcs
         finally:
             conn.close()
@@ -216,7 +218,8 @@ def test_ardupilot_gcs_failsafe_says_so_and_acts(enable: int, mode: int, fallbac
         assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
         assert gcs.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 5) == M.MAV_RESULT_ACCEPTED
         gcs.in_air()
-        assert not gcs.texts  # a commanded mode change that succeeds is not a text
+        # ArduCopter says it arms (recorded from SITL); a mode change that succeeds is no text
+        assert [t for _at, _sev, t in gcs.texts] == ["Arming motors"]
 
         host.vehicles[0].faults.deaf = True  # our heartbeats stop reaching the vehicle
         sev, txt = gcs.text("GCS Failsafe", timeout=4.0)
@@ -290,6 +293,21 @@ def _upload_square_fence(gcs: Gcs, host: EmulatorHost, half_m: float) -> None:
         )  # fmt: skip
 
 
+def _breach_by_moving_the_fence(gcs: Gcs, host: EmulatorHost) -> None:
+    """In GUIDED ArduCopter never flies out of its fence (a target outside it is refused:
+    recorded from SITL), so the fence moves: 4 m north inside a 6 m fence, then a 2 m one."""
+    _upload_square_fence(gcs, host, half_m=6.0)
+    _airborne_guided(gcs)
+    assert gcs.reposition(15.0, 0.0, host) == M.MAV_RESULT_FAILED  # outside: refused
+    assert gcs.reposition(4.0, 0.0, host) == M.MAV_RESULT_ACCEPTED
+    body = host.vehicles[0].world.body("uav0")
+    deadline = time.monotonic() + 10
+    while body.north < 3.8:
+        assert time.monotonic() < deadline, "did not reach 4 m north"
+        time.sleep(0.05)
+    _upload_square_fence(gcs, host, half_m=2.0)  # now the vehicle is outside
+
+
 def _bits(m: Any) -> tuple[bool, bool, bool]:
     """MAV_SYS_STATUS_GEOFENCE in (present, enabled, health)."""
     return (
@@ -316,12 +334,10 @@ def _airborne_guided(gcs: Gcs) -> None:
 
 def test_ardupilot_fence_health_bit_follows_the_breach() -> None:
     # FENCE_ACTION 0 (report only): present, not enabled; health clears while outside.
-    with ground_station("ardupilot", {"FENCE_ACTION": 0}) as (host, gcs):
+    with ground_station("ardupilot", {"FENCE_ACTION": 0, "FENCE_ENABLE": 1}) as (host, gcs):
         first = gcs.wait("SYS_STATUS", lambda m: m.get_type() == "SYS_STATUS")
         assert _bits(first) == (True, False, True)
-        _upload_square_fence(gcs, host, half_m=6.0)
-        _airborne_guided(gcs)
-        assert gcs.reposition(15.0, 0.0, host) == M.MAV_RESULT_ACCEPTED
+        _breach_by_moving_the_fence(gcs, host)
         assert gcs.text("Polygon fence breached", timeout=8.0) == (
             M.MAV_SEVERITY_NOTICE,
             "Polygon fence breached",
@@ -333,12 +349,11 @@ def test_ardupilot_fence_health_bit_follows_the_breach() -> None:
 
 
 def test_ardupilot_fence_breach_returns_home_and_fence_enable_clears_the_enabled_bit() -> None:
-    with ground_station("ardupilot") as (host, gcs):
+    # ArduCopter ships with FENCE_ENABLE 0 (the daemon turns it on at preflight)
+    with ground_station("ardupilot", {"FENCE_ENABLE": 1}) as (host, gcs):
         first = gcs.wait("SYS_STATUS", lambda m: m.get_type() == "SYS_STATUS")
         assert _bits(first) == (True, True, True)  # FENCE_TYPE 7, FENCE_ENABLE 1, ACTION 1
-        _upload_square_fence(gcs, host, half_m=6.0)
-        _airborne_guided(gcs)
-        assert gcs.reposition(20.0, 0.0, host) == M.MAV_RESULT_ACCEPTED
+        _breach_by_moving_the_fence(gcs, host)
         assert gcs.text("Polygon fence breached", timeout=8.0)[0] == M.MAV_SEVERITY_NOTICE
         gcs.wait("RTL", lambda m: m.get_type() == "HEARTBEAT" and gcs.mode() == AP_RTL)
 

@@ -61,7 +61,7 @@ async def test_mavsdk_flies_an_emulated_px4() -> None:
         version = await InfoAsync(system).get_version()
         assert version.flight_sw_major == 1
         assert await param.get_param_float("COM_OF_LOSS_T") == pytest.approx(1.0)
-        assert await param.get_param_int("COM_OBL_RC_ACT") == 5  # PX4's bytewise int encoding
+        assert await param.get_param_int("GF_ACTION") == 2  # PX4's bytewise int encoding
         await eventually(lambda: has_position(tel), True)
         pos = await tel.position()
         assert pos.latitude_deg == pytest.approx(ap.origin.lat_deg, abs=1e-6)

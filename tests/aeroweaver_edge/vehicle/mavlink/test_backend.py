@@ -15,6 +15,7 @@ from aeroweaver_edge.vehicle.errors import VehicleError
 from aeroweaver_edge.vehicle.mavlink.backend import MavlinkVehicle
 from aeroweaver_edge.vehicle.mavlink.codec import mavlink
 from aeroweaver_edge.vehicle.mavlink.commands import CommandError
+from aeroweaver_edge.vehicle.mavlink.geo import DEFAULT_ORIGIN, GeoOrigin
 from aeroweaver_edge.vehicle.mavlink.link import LinkError
 from tests.helpers.mav import ThreadedEmulator, emulated, free_udp_ports, until, vehicle_config
 
@@ -148,7 +149,8 @@ async def test_a_command_racing_the_lease_expiry_is_not_overridden_by_the_hold()
 
 
 async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> None:
-    async with emulated(1, vehicle={"link_timeout_s": 1.5}) as (host, [v]):
+    # real time: the failsafe's landing (7 s from 5 m) outlasts the link's recovery below
+    async with emulated(1, vehicle={"link_timeout_s": 1.5}, time_scale=1.0) as (host, [v]):
         ap = host.vehicles[0]
         await fly(v)
         await v.set_velocity(2.0, 1.0, 0.0)
@@ -158,7 +160,8 @@ async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> No
         assert not (await v.health()).ok
         assert not v.stream.active  # the stream stopped with the link
         ap.faults.deaf = False
-        await until(lambda: ap.mode == "AUTO.LOITER", 3, "offboard-loss failsafe")
+        # the companion-loss failsafe the daemon set at preflight: land (COM_OBL_RC_ACT 4)
+        await until(lambda: ap.mode == "AUTO.LAND", 3, "offboard-loss failsafe")
         with pytest.raises(VehicleError, match="no new motion"):
             await v.set_velocity(1.0, 0.0, 0.0)
         ap.faults.mute = False
@@ -167,7 +170,7 @@ async def test_link_loss_is_detected_and_motion_never_resumes_on_its_own() -> No
         hb = v.link.stats.datagrams
         await until(lambda: v.link.stats.datagrams > hb + 20, 5, "traffic after recovery")
         assert ap.setpoints == seen  # nothing was streamed again on its own
-        assert ap.mode == "AUTO.LOITER"
+        assert ap.mode == "AUTO.LAND"
         await v.set_velocity(1.0, 0.0, 0.0)  # a fresh command: offboard again
         assert ap.mode == "OFFBOARD"
 
@@ -193,7 +196,7 @@ def test_an_event_loop_stall_stops_the_stream_and_the_autopilot_failsafe_fires()
                 time.sleep(1.5)  # noqa: ASYNC251 - the stall under test: the loop is blocked
                 # The emulator (another thread) saw the stream stop and failed safe.
                 assert any("offboard loss" in e for _t, e in ap.events)
-                assert ap.mode == "AUTO.LOITER"
+                assert ap.mode == "AUTO.LAND"  # the companion-loss failsafe set at preflight
                 assert time.monotonic() - stalled_at >= 1.5
                 await until(lambda: v.stream.stats.expired == 1, 2, "lease expiry noticed")
                 assert not v.stream.active  # the old setpoint is never resumed
@@ -235,11 +238,13 @@ async def test_own_body_scoping_only_the_configured_system_is_ever_addressed() -
 
 
 async def test_failsafe_check_refuses_to_arm_an_unsafe_profile_and_names_the_parameter() -> None:
-    async with emulated(1, params={"COM_OBL_RC_ACT": 0}) as (host, [v]):
+    check = {"companion_failsafe": "check"}  # verify only: the daemon writes nothing
+    async with emulated(1, params={"COM_OBL_RC_ACT": 0}, vehicle=check) as (host, [v]):
         assert v.refused is not None
-        assert "COM_OBL_RC_ACT=0" in v.refused
+        assert "COM_OBL_RC_ACT=0, needs 4 or 3" in v.refused
         assert not (await v.health()).ok
-        with pytest.raises(VehicleError, match="refusing to arm: COM_OBL_RC_ACT=0"):
+        assert host.vehicles[0].param("COM_OBL_RC_ACT") == 0  # nothing written
+        with pytest.raises(VehicleError, match="refusing to arm: companion-loss failsafe: COM_OBL"):
             await v.arm()
         assert executed(host.vehicles[0], ARM) == 0
 
@@ -314,3 +319,24 @@ async def test_stale_position_telemetry_degrades_even_with_heartbeats() -> None:
         assert v.link.alive  # heartbeats still flow
         with pytest.raises(VehicleError, match="telemetry stale; no new motion"):
             await v.set_velocity(1.0, 0.0, 0.0)
+
+
+async def test_vehicle_origin_shifts_positions_targets_and_the_fence_into_the_swarm_frame() -> None:
+    """Each real autopilot's local frame is centred where it booted; ``vehicle.origin`` puts
+    every vehicle into one shared frame (SITL instances at different homes, a real swarm)."""
+    south = DEFAULT_ORIGIN.to_global(-10.0, 4.0, 0.0)  # the swarm's origin: 10 m S, 4 m E
+    async with emulated(1, vehicle={"origin": list(south)}) as (host, [v]):
+        ap = host.vehicles[0]
+        raw = v.link.last["LOCAL_POSITION_NED"]
+        st = await v.state()
+        assert st.pos[0] == pytest.approx(float(raw.x) + 10.0, abs=0.05)
+        assert st.pos[1] == pytest.approx(float(raw.y) - 4.0, abs=0.05)
+        fence = ap.fence  # the gate's rectangle, anchored at the swarm origin
+        lat0 = min(item.x for item in fence) / 1e7
+        n_min = SafetyConfig().geofence_north_m[0]
+        assert lat0 == pytest.approx(GeoOrigin(*south).to_global(n_min, 0.0)[0], abs=1e-6)
+        await fly(v)
+        await v.goto(st.pos[0] + 3.0, st.pos[1], -5.0)  # in the swarm frame
+        await until(lambda: ap.setpoint is not None and ap.setpoint[0] == "position", 2, "target")
+        assert ap.setpoint is not None
+        assert ap.setpoint[1] == pytest.approx(float(raw.x) + 3.0, abs=0.1)  # autopilot frame
